@@ -1,0 +1,124 @@
+"""Networks: the preference-conditioned multi-head Q-network and the preference discriminator.
+
+* :class:`QNetwork` -- Q(s, a, omega), paper sec. 4: the state and the preference are concatenated and go
+  through four fully connected hidden layers {64, 128, 128, 64}; the output has one head per objective, i.e.
+  ``|A| x m`` values (Abels et al. 2019's conditioned network).
+* :class:`Discriminator` -- q_phi(omega | s), paper eq. 6: three fully connected layers that output a
+  categorical distribution over the N_I preference cells of preference exploration (see docs/design.md).
+* :class:`ObsEncoder` -- turns a Gymnasium observation into a flat float vector: a bounded ``Box`` is scaled
+  to [0, 1], an unbounded one is flattened, a ``Discrete`` one is one-hot encoded.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import gymnasium as gym
+import numpy as np
+import torch
+from torch import nn
+
+from mope.errors import EnvironmentError_
+
+
+class ObsEncoder(nn.Module):
+    """Flat float features of an observation from a ``Box`` or ``Discrete`` space."""
+
+    def __init__(self, space: gym.Space) -> None:
+        super().__init__()
+        if isinstance(space, gym.spaces.Discrete):
+            self.kind = "discrete"
+            self.n = int(space.n)
+            self.start = int(space.start)
+            self.out_dim = self.n
+            self.register_buffer("low", torch.zeros(1))
+            self.register_buffer("scale", torch.ones(1))
+        elif isinstance(space, gym.spaces.Box):
+            self.kind = "box"
+            low = np.asarray(space.low, dtype=np.float64).reshape(-1)
+            high = np.asarray(space.high, dtype=np.float64).reshape(-1)
+            bounded = np.isfinite(low) & np.isfinite(high) & (high > low)
+            scale = np.where(bounded, high - low, 1.0)
+            low = np.where(bounded, low, 0.0)
+            self.out_dim = int(low.size)
+            self.register_buffer("low", torch.as_tensor(low, dtype=torch.float32))
+            self.register_buffer("scale", torch.as_tensor(scale, dtype=torch.float32))
+        else:
+            raise EnvironmentError_(
+                f"observation space {space} is not supported; mope needs a Box or Discrete observation "
+                "(wrap others with gymnasium.wrappers.FlattenObservation)"
+            )
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        """Encode a batch of raw observations ``(B, ...)`` into ``(B, out_dim)`` floats."""
+        if self.kind == "discrete":
+            return nn.functional.one_hot(obs.long().reshape(-1) - self.start, self.n).float()
+        return (obs.reshape(obs.shape[0], -1).float() - self.low) / self.scale
+
+
+def mlp(in_dim: int, hidden: Sequence[int], out_dim: int) -> nn.Sequential:
+    """Fully connected ReLU network ``in_dim -> hidden... -> out_dim``."""
+    layers: list[nn.Module] = []
+    d = in_dim
+    for h in hidden:
+        layers += [nn.Linear(d, h), nn.ReLU()]
+        d = h
+    layers.append(nn.Linear(d, out_dim))
+    return nn.Sequential(*layers)
+
+
+class QNetwork(nn.Module):
+    """Preference-conditioned multi-objective Q-network Q(s, a, omega) with one head per objective.
+
+    Args:
+        obs_space: The environment's observation space.
+        n_actions: |A|.
+        n_objectives: m.
+        hidden: Hidden layer widths; the paper uses (64, 128, 128, 64).
+    """
+
+    def __init__(self, obs_space: gym.Space, n_actions: int, n_objectives: int,
+                 hidden: Sequence[int] = (64, 128, 128, 64)) -> None:
+        super().__init__()
+        self.encoder = ObsEncoder(obs_space)
+        self.n_actions = n_actions
+        self.n_objectives = n_objectives
+        self.net = mlp(self.encoder.out_dim + n_objectives, hidden, n_actions * n_objectives)
+
+    def forward(self, obs: torch.Tensor, pref: torch.Tensor) -> torch.Tensor:
+        """Q-values for all actions.
+
+        Args:
+            obs: ``(R, ...)`` raw observations.
+            pref: ``(R, m)`` preferences.
+
+        Returns:
+            ``(R, |A|, m)`` vector Q-values.
+        """
+        x = torch.cat([self.encoder(obs), pref], dim=1)
+        return self.net(x).view(-1, self.n_actions, self.n_objectives)
+
+    def forward_features(self, feats: torch.Tensor, pref: torch.Tensor) -> torch.Tensor:
+        """Same as :meth:`forward` for already encoded observations (lets a batch encode once)."""
+        return self.net(torch.cat([feats, pref], dim=1)).view(-1, self.n_actions, self.n_objectives)
+
+
+class Discriminator(nn.Module):
+    """q_phi(omega | s): logits of a categorical distribution over the N_I preference cells (eq. 6).
+
+    Three fully connected layers: ``obs -> hidden[0] -> hidden[1] -> N_I``.
+    """
+
+    def __init__(self, obs_space: gym.Space, n_cells: int, hidden: Sequence[int] = (64, 64)) -> None:
+        super().__init__()
+        self.encoder = ObsEncoder(obs_space)
+        self.n_cells = n_cells
+        self.net = mlp(self.encoder.out_dim, hidden, n_cells)
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        """``(B, N_I)`` logits for raw observations ``(B, ...)``."""
+        return self.net(self.encoder(obs))
+
+    def log_prob(self, obs: torch.Tensor, cells: torch.Tensor) -> torch.Tensor:
+        """``log q_phi(cell | s)`` for each row."""
+        return torch.log_softmax(self(obs), dim=1).gather(1, cells.long().view(-1, 1)).squeeze(1)

@@ -1,0 +1,173 @@
+"""Replay buffer with the acting preference stored per transition, and prioritized sampling.
+
+Each transition is ``(s, omega_b, a, r, s', terminated)``: the preference ``omega_b`` the agent acted under is
+kept so experience exploration can relabel around it (paper sec. 3).
+
+Prioritized replay (Schaul et al. 2016) uses a :class:`SumTree` whose updates and prefix-sum searches are
+vectorised over the batch: one numpy operation per tree level, never a Python loop per sample.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+class SumTree:
+    """Binary sum tree over ``capacity`` non-negative priorities (leaf ``i`` holds priority ``i``).
+
+    The tree is stored in one array of size ``2 * size`` with the root at index 1 and the leaves at
+    ``[size, 2 * size)``, where ``size`` is ``capacity`` rounded up to a power of two.
+    """
+
+    def __init__(self, capacity: int) -> None:
+        if capacity < 1:
+            raise ValueError(f"SumTree capacity must be >= 1, got {capacity}")
+        self.capacity = capacity
+        self.size = 1 << max(0, (capacity - 1).bit_length())
+        self.depth = self.size.bit_length() - 1
+        self.tree = np.zeros(2 * self.size, dtype=np.float64)
+
+    @property
+    def total(self) -> float:
+        """Sum of all priorities."""
+        return float(self.tree[1])
+
+    def get(self, idx: np.ndarray) -> np.ndarray:
+        """Priorities at leaf indices ``idx``."""
+        return self.tree[self.size + np.asarray(idx)]
+
+    def update(self, idx: np.ndarray, priorities: np.ndarray) -> None:
+        """Set leaf priorities and refresh their ancestors, one vectorised step per level."""
+        idx = np.asarray(idx, dtype=np.int64).reshape(-1)
+        pr = np.asarray(priorities, dtype=np.float64).reshape(-1)
+        if idx.size == 0:
+            return
+        if np.any(pr < 0) or not np.all(np.isfinite(pr)):
+            raise ValueError("priorities must be finite and >= 0")
+        nodes = self.size + idx
+        self.tree[nodes] = pr
+        for _ in range(self.depth):
+            nodes = np.unique(nodes >> 1)
+            self.tree[nodes] = self.tree[2 * nodes] + self.tree[2 * nodes + 1]
+
+    def find(self, values: np.ndarray) -> np.ndarray:
+        """Leaf index whose prefix-sum interval contains each value in ``values`` (all in ``[0, total)``)."""
+        v = np.asarray(values, dtype=np.float64).copy()
+        nodes = np.ones(v.shape, dtype=np.int64)
+        for _ in range(self.depth):
+            left = self.tree[2 * nodes]
+            right = v >= left
+            v = np.where(right, v - left, v)
+            nodes = 2 * nodes + right
+        leaves = nodes - self.size
+        return np.minimum(leaves, self.capacity - 1)
+
+
+@dataclass
+class Batch:
+    """A sampled batch; ``weights`` are importance-sampling weights (ones without PER)."""
+
+    indices: np.ndarray
+    obs: np.ndarray
+    prefs: np.ndarray
+    actions: np.ndarray
+    rewards: np.ndarray
+    next_obs: np.ndarray
+    terminated: np.ndarray
+    weights: np.ndarray
+
+
+class ReplayBuffer:
+    """FIFO replay buffer of ``(s, omega_b, a, r, s', terminated)`` with optional prioritized sampling.
+
+    Args:
+        capacity: Maximum number of transitions.
+        obs_shape: Shape of one observation.
+        n_objectives: m.
+        prioritized: Sample proportionally to priority^alpha (priorities are given already exponentiated).
+        obs_dtype: Storage dtype of observations.
+    """
+
+    def __init__(self, capacity: int, obs_shape: tuple[int, ...], n_objectives: int, prioritized: bool = True,
+                 obs_dtype: np.dtype = np.float32) -> None:
+        self.capacity = capacity
+        self.prioritized = prioritized
+        self.obs = np.zeros((capacity, *obs_shape), dtype=obs_dtype)
+        self.next_obs = np.zeros((capacity, *obs_shape), dtype=obs_dtype)
+        self.prefs = np.zeros((capacity, n_objectives), dtype=np.float32)
+        self.actions = np.zeros(capacity, dtype=np.int64)
+        self.rewards = np.zeros((capacity, n_objectives), dtype=np.float32)
+        self.terminated = np.zeros(capacity, dtype=np.float32)
+        self.tree = SumTree(capacity) if prioritized else None
+        self.max_priority = 1.0
+        self.pos = 0
+        self.full = False
+
+    def __len__(self) -> int:
+        return self.capacity if self.full else self.pos
+
+    def add(self, obs: np.ndarray, pref: np.ndarray, action: int, reward: np.ndarray, next_obs: np.ndarray,
+            terminated: bool) -> None:
+        """Store one transition; a new transition gets the largest priority seen so far."""
+        i = self.pos
+        self.obs[i] = obs
+        self.prefs[i] = pref
+        self.actions[i] = action
+        self.rewards[i] = reward
+        self.next_obs[i] = next_obs
+        self.terminated[i] = float(terminated)
+        if self.tree is not None:
+            self.tree.update(np.array([i]), np.array([self.max_priority]))
+        self.pos = (i + 1) % self.capacity
+        self.full = self.full or self.pos == 0
+
+    def sample(self, batch_size: int, rng: np.random.Generator, beta: float = 0.4) -> Batch:
+        """Sample a batch; with PER, stratified proportional sampling and IS weights normalised by their max."""
+        n = len(self)
+        if n == 0:
+            raise ValueError("cannot sample from an empty replay buffer")
+        if self.tree is None:
+            idx = rng.integers(0, n, size=batch_size)
+            weights = np.ones(batch_size, dtype=np.float32)
+        else:
+            total = self.tree.total
+            seg = total / batch_size
+            values = (np.arange(batch_size) + rng.random(batch_size)) * seg
+            idx = self.tree.find(np.minimum(values, np.nextafter(total, 0)))
+            idx = np.minimum(idx, n - 1)
+            probs = self.tree.get(idx) / total
+            w = (n * np.maximum(probs, 1e-12)) ** (-beta)
+            weights = (w / w.max()).astype(np.float32)
+        return Batch(idx, self.obs[idx], self.prefs[idx], self.actions[idx], self.rewards[idx],
+                     self.next_obs[idx], self.terminated[idx], weights)
+
+    def update_priorities(self, idx: np.ndarray, priorities: np.ndarray) -> None:
+        """Set new priorities (already raised to alpha) for sampled indices."""
+        if self.tree is None:
+            return
+        self.tree.update(idx, priorities)
+        self.max_priority = max(self.max_priority, float(np.max(priorities)))
+
+    def state_dict(self) -> dict:
+        """Arrays and pointers, for checkpoints."""
+        n = len(self)
+        state = {
+            "obs": self.obs[:n].copy(), "next_obs": self.next_obs[:n].copy(), "prefs": self.prefs[:n].copy(),
+            "actions": self.actions[:n].copy(), "rewards": self.rewards[:n].copy(),
+            "terminated": self.terminated[:n].copy(), "pos": self.pos, "full": self.full,
+            "max_priority": self.max_priority,
+        }
+        if self.tree is not None:
+            state["priorities"] = self.tree.get(np.arange(n))
+        return state
+
+    def load_state_dict(self, state: dict) -> None:
+        """Restore from :meth:`state_dict`."""
+        n = len(state["actions"])
+        for key in ("obs", "next_obs", "prefs", "actions", "rewards", "terminated"):
+            getattr(self, key)[:n] = np.asarray(state[key])
+        self.pos, self.full, self.max_priority = int(state["pos"]), bool(state["full"]), float(state["max_priority"])
+        if self.tree is not None and "priorities" in state:
+            self.tree.update(np.arange(n), np.asarray(state["priorities"]))

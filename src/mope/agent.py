@@ -177,7 +177,7 @@ class MoPE:
         b = len(acting_prefs)
         if not c.experience_exploration:
             shared = sample_simplex(c.n_omega, self.m, self.rng)
-            return np.broadcast_to(shared, (b, c.n_omega, self.m))
+            return np.repeat(shared[None], b, axis=0)
         near = sample_neighbours(acting_prefs, c.n_omega - 1, c.sigma_omega, self.rng)
         return np.concatenate([acting_prefs[:, None, :].astype(np.float64), near], axis=1)
 

@@ -1,0 +1,181 @@
+"""The ``mope`` command line: train, eval, act, envs.
+
+Every bad input ends in one line ``error: ...`` on stderr and exit code 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from mope.config import ALGOS, Config
+from mope.errors import ConfigError, MopeError, suggest
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+                  help="Multi-objective RL with Preference Exploration (MoPE) and Envelope Q-learning.")
+
+
+def _fail(message: str) -> None:
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(2)
+
+
+def _parse_sets(items: list[str]) -> dict[str, Any]:
+    """``KEY=VALUE`` pairs; VALUE is read as JSON when it parses (numbers, lists, null), else as a string."""
+    out: dict[str, Any] = {}
+    names = Config.field_names()
+    for item in items:
+        if "=" not in item:
+            raise ConfigError(f"--set '{item}' is not KEY=VALUE")
+        key, raw = item.split("=", 1)
+        key = key.strip().replace("-", "_")
+        if key not in names:
+            raise ConfigError(f"unknown config key '{key}'{suggest(key, names)}")
+        try:
+            value = json.loads(raw)
+        except json.JSONDecodeError:
+            value = [int(x) for x in raw.split(",")] if key in ("hidden_sizes", "disc_hidden") else raw
+        out[key] = value
+    return out
+
+
+@app.command()
+def train(
+    env: Annotated[str, typer.Option(help="Environment id (MO-Gymnasium).")] = "deep-sea-treasure-v0",
+    algo: Annotated[str, typer.Option(help=f"Variant: {', '.join(ALGOS)}.")] = "mope",
+    steps: Annotated[int | None, typer.Option(help="Environment steps.")] = None,
+    seed: Annotated[int | None, typer.Option(help="Random seed.")] = None,
+    out: Annotated[Path | None, typer.Option(help="Run folder (default runs/<env>-<algo>-s<seed>).")] = None,
+    eval_every: Annotated[int | None, typer.Option(help="Evaluate every N steps (0: only at the end).")] = None,
+    eval_prefs: Annotated[int | None, typer.Option(help="Preferences per evaluation (paper: 2000).")] = None,
+    n_omega: Annotated[int | None, typer.Option(help="Relabeled preferences per transition, N_omega.")] = None,
+    sigma_omega: Annotated[float | None, typer.Option(help="Relabeling radius, sigma_omega.")] = None,
+    mi_alpha: Annotated[float | None, typer.Option(help="Weight alpha of the MI priority term (eq. 7).")] = None,
+    n_intervals: Annotated[int | None, typer.Option(help="Preference intervals N_I for PE.")] = None,
+    hidden: Annotated[str | None, typer.Option(help="Q-network hidden sizes, e.g. 64,128,128,64.")] = None,
+    device: Annotated[str | None, typer.Option(help="cpu, cuda or auto.")] = None,
+    config: Annotated[Path | None, typer.Option(help="JSON/YAML config file; flags override it.")] = None,
+    set_: Annotated[list[str] | None, typer.Option("--set", help="Any config field: --set batch_size=64.")] = None,
+    overwrite: Annotated[bool, typer.Option(help="Replace an existing run in --out.")] = False,
+    progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
+) -> None:
+    """Train an agent, evaluating CR/HV/EUM as it goes; writes a run folder."""
+    from mope.experiments import train_run
+
+    try:
+        base: dict[str, Any] = Config.load(config).to_dict() if config else {}
+        base.pop("algo", None)
+        if algo not in ALGOS:
+            raise ConfigError(f"unknown algorithm '{algo}'{suggest(algo, ALGOS)}; choose one of {', '.join(ALGOS)}")
+        flags = {"env_id": env, "total_steps": steps, "seed": seed, "eval_every": eval_every,
+                 "eval_prefs": eval_prefs, "n_omega": n_omega, "sigma_omega": sigma_omega, "mi_alpha": mi_alpha,
+                 "n_intervals": n_intervals, "device": device}
+        if hidden is not None:
+            try:
+                flags["hidden_sizes"] = [int(x) for x in hidden.split(",")]
+            except ValueError:
+                raise ConfigError(f"--hidden '{hidden}' is not a comma-separated list of integers") from None
+        base.update({k: v for k, v in flags.items() if v is not None})
+        base.update(_parse_sets(set_ or []))
+        base.pop("experience_exploration", None)
+        base.pop("preference_exploration", None)
+        cfg = Config.for_algo(algo, **base)
+        run_dir = out or Path("runs") / f"{cfg.env_id}-{cfg.algo}-s{cfg.seed}"
+        result = train_run(cfg, run_dir, progress=progress, overwrite=overwrite)
+    except MopeError as exc:
+        _fail(str(exc))
+        return
+    except KeyboardInterrupt:
+        typer.echo(f"\ninterrupted; weights saved in {run_dir}/checkpoints/interrupted.pt", err=True)
+        raise typer.Exit(130) from None
+    f = {k: result.final.get(k, float("nan")) for k in ("cr", "hv", "eum", "eum_optimal", "optimal_share",
+                                                          "timeout_share")}
+    typer.echo(
+        f"{cfg.algo} on {cfg.env_id}, {cfg.total_steps} steps, seed {cfg.seed}: CR {f['cr']:.3f}  HV {f['hv']:.2f}  "
+        f"EUM {f['eum']:.3f} (optimum {f['eum_optimal']:.3f})  optimal share {f['optimal_share']:.3f}  "
+        f"timeouts {f['timeout_share']:.3f}  [{result.wall_s:.0f} s]\nrun folder: {result.out_dir}"
+    )
+
+
+def _print_metrics(res: dict[str, float]) -> None:
+    for key in ("cr", "precision", "recall", "hv", "eum", "eum_optimal", "eum_gap", "optimal_share",
+                "cardinality", "timeout_share"):
+        if key in res:
+            typer.echo(f"{key:>14}: {res[key]:.4f}")
+
+
+@app.command("eval")
+def eval_(
+    run_or_checkpoint: Annotated[Path, typer.Argument(help="A run folder or a checkpoint file.")],
+    prefs: Annotated[int, typer.Option(help="Number of uniform preferences.")] = 2000,
+    seed: Annotated[int | None, typer.Option(help="Seed of the preference set (default: the run's).")] = None,
+    out: Annotated[Path | None, typer.Option(help="Solutions CSV (default next to the checkpoint).")] = None,
+) -> None:
+    """Evaluate a trained agent: CR, HV, EUM and more; writes the solution set as CSV."""
+    from mope.experiments import evaluate_checkpoint, resolve_checkpoint
+
+    try:
+        ckpt = resolve_checkpoint(run_or_checkpoint)
+        target = out or ckpt.parent / f"{ckpt.stem}_solutions_{prefs}.csv"
+        res, _ = evaluate_checkpoint(ckpt, prefs, seed, target)
+    except MopeError as exc:
+        _fail(str(exc))
+        return
+    typer.echo(f"checkpoint: {ckpt}")
+    _print_metrics(res)
+    typer.echo(f"solutions: {target}")
+
+
+@app.command()
+def act(
+    checkpoint: Annotated[Path, typer.Argument(help="A run folder or a checkpoint file.")],
+    pref: Annotated[str, typer.Option(help="Preference, e.g. 0.3,0.7.")],
+) -> None:
+    """Play one greedy episode under a preference and print its return vector."""
+    from mope.experiments import play
+
+    try:
+        sols = play(checkpoint, pref)
+    except MopeError as exc:
+        _fail(str(exc))
+        return
+    fmt = ", ".join
+    typer.echo(f"preference: [{fmt(f'{x:.4g}' for x in sols.prefs[0])}]")
+    typer.echo(f"return: [{fmt(f'{x:.4g}' for x in sols.returns[0])}]")
+    typer.echo(f"discounted return: [{fmt(f'{x:.4g}' for x in sols.discounted[0])}]")
+    typer.echo(f"length: {int(sols.lengths[0])}{'' if sols.terminated[0] else ' (time limit)'}")
+
+
+@app.command()
+def envs() -> None:
+    """List MO-Gymnasium environments mope's agents can use directly (discrete actions)."""
+    import gymnasium as gym
+
+    from mope.envs import make_env
+
+    for env_id in sorted(gym.registry):
+        spec = gym.registry[env_id]
+        if "mo_gymnasium" not in str(spec.entry_point) and "mope" not in str(spec.entry_point):
+            continue
+        try:
+            make_env(env_id).close()
+        except Exception:  # noqa: BLE001 - skip what does not fit or needs extra packages
+            continue
+        typer.echo(env_id)
+
+
+def main() -> None:
+    """Entry point of the ``mope`` script."""
+    try:
+        app()
+    except MopeError as exc:  # anything that escaped a command
+        typer.echo(f"error: {exc}", err=True)
+        sys.exit(2)
+
+
+if __name__ == "__main__":
+    main()

@@ -210,7 +210,7 @@ class MoPE:
         with torch.no_grad():
             next_feats = self.target_net.encoder(next_obs)
             y = envelope_target(self.target_net, next_feats, rewards, terminated, w, self.envelope_set(w, acting),
-                                c.gamma)
+                                c.gamma, select_net=self.q_net if c.double_q else None)
 
         feats = self.q_net.encoder(obs)
         feats_rows = feats.unsqueeze(1).expand(b, n, feats.shape[1]).reshape(b * n, -1)

@@ -64,6 +64,9 @@ class Config:
     #: Weight of the auxiliary loss: L = L^A + lb_weight * L^B. The paper uses 1.
     lb_weight: float = 1.0
     max_grad_norm: float | None = 10.0
+    #: Pick (a*, w'*) of the envelope target with the online network, read the value from the target network
+    #: (double Q-learning). Not in the paper; see docs/design.md for why it is on by default.
+    double_q: bool = True
     epsilon_start: float = 1.0
     epsilon_end: float = 0.05
     epsilon_decay_steps: int = 10_000

@@ -13,7 +13,7 @@ from mope.networks import QNetwork
 
 def envelope_target(target_net: QNetwork, next_feats: torch.Tensor, rewards: torch.Tensor,
                     terminated: torch.Tensor, row_prefs: torch.Tensor, envelope_prefs: torch.Tensor,
-                    gamma: float) -> torch.Tensor:
+                    gamma: float, select_net: QNetwork | None = None) -> torch.Tensor:
     """Envelope target y of eq. 4 (Yang et al. 2019).
 
     For row ``(b, i)`` with preference ``w = row_prefs[b, i]``::
@@ -25,6 +25,10 @@ def envelope_target(target_net: QNetwork, next_feats: torch.Tensor, rewards: tor
     over ``B * K`` rows. Each of the ``N`` row preferences then only rescalarises those values, so the cost is
     never ``B * N * K`` network rows.
 
+    With ``select_net`` (double Q-learning, van Hasselt et al. 2016), the argmax is taken on ``select_net`` (the
+    online network) and the value read from ``target_net``; this curbs the overestimation that a max over
+    ``K * A`` noisy estimates otherwise feeds back through looping states.
+
     Args:
         target_net: The target Q-network.
         next_feats: ``(B, d)`` encoded next observations.
@@ -33,15 +37,18 @@ def envelope_target(target_net: QNetwork, next_feats: torch.Tensor, rewards: tor
         row_prefs: ``(B, N, m)`` preferences of the training rows.
         envelope_prefs: ``(B, K, m)`` preferences the max runs over.
         gamma: Discount factor.
+        select_net: Optional network for the argmax (double Q-learning).
 
     Returns:
         ``(B, N, m)`` targets.
     """
     b, k, m = envelope_prefs.shape
     feats = next_feats.unsqueeze(1).expand(b, k, next_feats.shape[1]).reshape(b * k, -1)
-    q_next = target_net.forward_features(feats, envelope_prefs.reshape(b * k, m)).view(b, k, -1, m)  # (B,K,A,m)
+    flat_prefs = envelope_prefs.reshape(b * k, m)
+    q_next = target_net.forward_features(feats, flat_prefs).view(b, k, -1, m)  # (B, K, A, m)
+    q_sel = q_next if select_net is None else select_net.forward_features(feats, flat_prefs).view(b, k, -1, m)
     a = q_next.shape[2]
-    scal = torch.einsum("bim,bkam->bika", row_prefs, q_next).reshape(b, row_prefs.shape[1], k * a)
+    scal = torch.einsum("bim,bkam->bika", row_prefs, q_sel).reshape(b, row_prefs.shape[1], k * a)
     best = scal.argmax(dim=2)  # (B, N) index into (K*A)
     q_flat = q_next.reshape(b, k * a, m)
     q_star = torch.gather(q_flat, 1, best.unsqueeze(-1).expand(-1, -1, m))  # (B, N, m)

@@ -1,0 +1,256 @@
+"""Tests of mope.losses on tiny cases worked out by hand (eq. 4-7 of the paper)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+
+import pytest
+import torch
+
+from mope.losses import envelope_target, eql_loss, mutual_information_bonus, preference_interval_td, priority
+
+
+@pytest.fixture(autouse=True)
+def one_torch_thread() -> Iterator[None]:
+    # These networks are tiny; with a second intra-op thread on a busy 2-core machine torch spends its time
+    # spinning (300 Adam steps: 0.3 s with one thread, 30+ s with two).
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+# Envelope preferences (K = 2) and the designed Q_target(s'_b, a, w') for A = 3 actions, m = 2 objectives.
+ENV_PREFS = [[1.0, 0.0], [0.0, 1.0]]
+# transition 0
+Q0 = [
+    [[1.0, 0.0], [0.0, 1.0], [0.4, 0.4]],  # w' = (1, 0)
+    [[2.0, -1.0], [0.0, 0.0], [0.6, 0.6]],  # w' = (0, 1)
+]
+# transition 1: a different table, so a row mix-up between transitions shows
+Q1 = [
+    [[0.0, 3.0], [1.0, 1.0], [0.2, 0.0]],
+    [[0.5, 0.5], [4.0, -2.0], [0.0, 0.0]],
+]
+# transition 2 (terminated): huge values that must never reach the target
+Q2 = [
+    [[100.0, 100.0], [100.0, 100.0], [100.0, 100.0]],
+    [[100.0, 100.0], [100.0, 100.0], [100.0, 100.0]],
+]
+# training-row preferences (N = 3), the same for every transition
+ROW_PREFS = [[1.0, 0.0], [0.0, 1.0], [0.5, 0.5]]
+
+
+class StubTarget:
+    """Stands in for the target network: returns designed Q-values and records every call."""
+
+    def __init__(self, table: torch.Tensor) -> None:
+        self.table = table  # (B, K, A, m)
+        self.calls: list[tuple[torch.Tensor, torch.Tensor]] = []
+
+    def forward_features(self, feats: torch.Tensor, prefs: torch.Tensor) -> torch.Tensor:
+        self.calls.append((feats.clone(), prefs.clone()))
+        b, k, a, m = self.table.shape
+        assert feats.shape[0] == prefs.shape[0]
+        out = []
+        for row in range(feats.shape[0]):
+            bi = int(feats[row, 0].item())  # the stub's "features" are the transition index
+            ki = [kk for kk in range(k) if torch.equal(prefs[row], ENV_PREFS_T[kk])]
+            assert len(ki) == 1, f"row {row} has a preference that is not an envelope preference: {prefs[row]}"
+            out.append(self.table[bi, ki[0]])
+        return torch.stack(out)  # (rows, A, m)
+
+
+ENV_PREFS_T = torch.tensor(ENV_PREFS)
+
+
+def run_target(gamma: float, terminated: list[float] | None = None) -> tuple[torch.Tensor, StubTarget]:
+    table = torch.tensor([Q0, Q1, Q2])
+    stub = StubTarget(table)
+    b = 3
+    feats = torch.tensor([[0.0, 7.0], [1.0, 7.0], [2.0, 7.0]])
+    rewards = torch.tensor([[1.0, -1.0], [0.0, -1.0], [3.0, -1.0]])
+    term = torch.tensor(terminated if terminated is not None else [0.0, 0.0, 1.0])
+    row_prefs = torch.tensor(ROW_PREFS).unsqueeze(0).expand(b, -1, -1)
+    env_prefs = ENV_PREFS_T.unsqueeze(0).expand(b, -1, -1)
+    y = envelope_target(stub, feats, rewards, term, row_prefs, env_prefs, gamma)  # type: ignore[arg-type]
+    return y, stub
+
+
+def test_envelope_target_hand_values() -> None:
+    y, _ = run_target(gamma=0.5)
+    assert y.shape == (3, 3, 2)
+    # transition 0, reward (1, -1):
+    #   w=(1,0): scalarised k0 [1, 0, .4], k1 [2, 0, .6] -> (k1, a0) -> Q* (2, -1)  -> y = (2, -1.5)
+    #   w=(0,1): k0 [0, 1, .4], k1 [-1, 0, .6]          -> (k0, a1) -> Q* (0, 1)   -> y = (1, -0.5)
+    #   w=(.5,.5): k0 [.5, .5, .4], k1 [.5, 0, .6]      -> (k1, a2) -> Q* (.6, .6) -> y = (1.3, -0.7)
+    torch.testing.assert_close(y[0], torch.tensor([[2.0, -1.5], [1.0, -0.5], [1.3, -0.7]]))
+    # transition 1, reward (0, -1):
+    #   w=(1,0): k0 [0, 1, .2], k1 [.5, 4, 0]   -> (k1, a1) -> Q* (4, -2) -> y = (2, -2)
+    #   w=(0,1): k0 [3, 1, 0], k1 [.5, -2, 0]   -> (k0, a0) -> Q* (0, 3)  -> y = (0, 0.5)
+    #   w=(.5,.5): k0 [1.5, 1, .1], k1 [.5, 1, 0] -> (k0, a0) -> Q* (0, 3) -> y = (0, 0.5)
+    torch.testing.assert_close(y[1], torch.tensor([[2.0, -2.0], [0.0, 0.5], [0.0, 0.5]]))
+    # transition 2 is terminated: only the reward
+    torch.testing.assert_close(y[2], torch.tensor([[3.0, -1.0]] * 3))
+
+
+def test_envelope_target_max_is_joint_over_actions_and_envelope_prefs() -> None:
+    # With the max over actions only at the row's own preference, row w=(1,0) of transition 0 would get
+    # Q(s', a0, (1,0)) = (1, 0); the envelope finds (2, -1) under the other preference.
+    y, _ = run_target(gamma=1.0)
+    torch.testing.assert_close(y[0, 0], torch.tensor([1.0 + 2.0, -1.0 - 1.0]))
+    assert not torch.allclose(y[0, 0], torch.tensor([1.0 + 1.0, -1.0 + 0.0]))
+
+
+@pytest.mark.parametrize("gamma", [0.5, 0.9, 0.99])
+def test_envelope_target_applies_gamma(gamma: float) -> None:
+    y, _ = run_target(gamma=gamma)
+    q_star_0 = torch.tensor([[2.0, -1.0], [0.0, 1.0], [0.6, 0.6]])
+    torch.testing.assert_close(y[0], torch.tensor([1.0, -1.0]) + gamma * q_star_0)
+    torch.testing.assert_close(y[2], torch.tensor([[3.0, -1.0]] * 3))
+
+
+def test_envelope_target_terminated_rows_get_only_reward() -> None:
+    y, _ = run_target(gamma=0.9, terminated=[1.0, 1.0, 1.0])
+    torch.testing.assert_close(y[0], torch.tensor([[1.0, -1.0]] * 3))
+    torch.testing.assert_close(y[1], torch.tensor([[0.0, -1.0]] * 3))
+    torch.testing.assert_close(y[2], torch.tensor([[3.0, -1.0]] * 3))
+
+
+def test_envelope_target_calls_network_once_with_b_times_k_rows() -> None:
+    _, stub = run_target(gamma=0.5)
+    assert len(stub.calls) == 1
+    feats, prefs = stub.calls[0]
+    b, n, k = 3, 3, 2
+    assert feats.shape == (b * k, 2)  # 6 rows, never B * N * K = 18
+    assert prefs.shape == (b * k, 2)
+    # row b * K + k holds transition b's features and its k-th envelope preference
+    torch.testing.assert_close(feats[:, 0], torch.tensor([0.0, 0.0, 1.0, 1.0, 2.0, 2.0]))
+    torch.testing.assert_close(feats[:, 1], torch.full((6,), 7.0))
+    torch.testing.assert_close(prefs, torch.tensor(ENV_PREFS * b))
+    assert feats.shape[0] != b * n * k
+
+
+def test_envelope_target_with_different_k_and_n() -> None:
+    # K = 1: the envelope collapses to a max over actions at that single preference
+    table = torch.tensor([[Q0[1]]])  # (1, 1, 3, 2): Q under w' = (0, 1)
+    calls = []
+
+    class One:
+        def forward_features(self, feats: torch.Tensor, prefs: torch.Tensor) -> torch.Tensor:
+            calls.append(feats.shape[0])
+            return table.reshape(1, 3, 2)
+
+    rows = torch.tensor([[[1.0, 0.0], [0.0, 1.0], [0.5, 0.5], [0.25, 0.75]]])
+    y = envelope_target(One(), torch.zeros(1, 4), torch.zeros(1, 2), torch.zeros(1), rows,  # type: ignore[arg-type]
+                        torch.tensor([[[0.0, 1.0]]]), 1.0)
+    assert calls == [1]
+    # Q = [(2,-1), (0,0), (.6,.6)]; w=(1,0) -> a0; w=(0,1) -> a2; w=(.5,.5) -> a2 (.6 > .5); w=(.25,.75) -> a2
+    torch.testing.assert_close(y[0], torch.tensor([[2.0, -1.0], [0.6, 0.6], [0.6, 0.6], [0.6, 0.6]]))
+
+
+def test_envelope_target_with_real_network_shapes() -> None:
+    import gymnasium as gym
+
+    from mope.networks import QNetwork
+
+    torch.manual_seed(0)
+    net = QNetwork(gym.spaces.Box(0.0, 1.0, (3,)), n_actions=4, n_objectives=2, hidden=(8,))
+    b, n, k = 5, 6, 7
+    feats = torch.rand(b, 3)
+    rows = torch.softmax(torch.randn(b, n, 2), -1)
+    env = torch.softmax(torch.randn(b, k, 2), -1)
+    y = envelope_target(net, feats, torch.zeros(b, 2), torch.zeros(b), rows, env, 1.0)
+    assert y.shape == (b, n, 2)
+    # brute force: for every row, the best (a, w') of w^T Q(s', a, w')
+    for bi in range(b):
+        q = net.forward_features(feats[bi].expand(k, 3), env[bi])  # (K, A, m)
+        for i in range(n):
+            scal = (q * rows[bi, i]).sum(-1)
+            kk, aa = divmod(int(scal.argmax()), 4)
+            torch.testing.assert_close(y[bi, i], q[kk, aa])
+
+
+# ------------------------------------------------------------------------------------------- EQL loss
+Q = torch.tensor([[[1.0, 2.0], [0.0, 0.0]]])  # (B=1, N=2, m=2)
+Y = torch.tensor([[[2.0, 0.0], [1.0, 1.0]]])
+W = torch.tensor([[[0.5, 0.5], [1.0, 0.0]]])
+
+
+def test_eql_loss_hand_values() -> None:
+    # y - Q: row 0 (1, -2), row 1 (1, 1)
+    # L^A = mean(1 + 4, 1 + 1) = 3.5;  L^B = mean(|0.5 - 1|, |1|) = 0.75
+    loss, l_a, l_b = eql_loss(Q, Y, W)
+    torch.testing.assert_close(l_a, torch.tensor([3.5]))
+    torch.testing.assert_close(l_b, torch.tensor([0.75]))
+    torch.testing.assert_close(loss, torch.tensor([4.25]))
+    loss2, _, _ = eql_loss(Q, Y, W, lb_weight=2.0)
+    torch.testing.assert_close(loss2, torch.tensor([5.0]))
+    loss0, _, _ = eql_loss(Q, Y, W, lb_weight=0.0)
+    torch.testing.assert_close(loss0, torch.tensor([3.5]))
+
+
+def test_eql_loss_is_per_transition() -> None:
+    q = torch.cat([Q, torch.zeros(1, 2, 2)])
+    y = torch.cat([Y, torch.tensor([[[3.0, 4.0], [0.0, 0.0]]])])
+    w = torch.cat([W, torch.tensor([[[0.0, 1.0], [0.5, 0.5]]])])
+    loss, l_a, l_b = eql_loss(q, y, w)
+    # transition 1: rows (3, 4) and (0, 0): L^A = mean(25, 0) = 12.5, L^B = mean(4, 0) = 2
+    torch.testing.assert_close(l_a, torch.tensor([3.5, 12.5]))
+    torch.testing.assert_close(l_b, torch.tensor([0.75, 2.0]))
+    torch.testing.assert_close(loss, torch.tensor([4.25, 14.5]))
+
+
+def test_eql_loss_zero_at_target_and_gradient_flows_to_q() -> None:
+    q = Y.clone().requires_grad_(True)
+    loss, _, _ = eql_loss(q, Y, W)
+    assert loss.item() == 0.0
+    q = Q.clone().requires_grad_(True)
+    loss, _, _ = eql_loss(q, Y, W, lb_weight=0.0)
+    loss.sum().backward()
+    # d/dQ mean_i ||y_i - Q_i||^2 = -2 (y - Q) / N
+    torch.testing.assert_close(q.grad, -2.0 * (Y - Q) / 2.0)
+
+
+# ------------------------------------------------------------------------------------------- eq. 5
+def test_preference_interval_td_is_signed_mean() -> None:
+    # scalarised errors: row 0 0.5 * 1 + 0.5 * (-2) = -0.5, row 1 1 -> mean 0.25 (the mean of |.| would be 0.75)
+    td = preference_interval_td(Q, Y, W)
+    torch.testing.assert_close(td, torch.tensor([0.25]))
+
+
+def test_preference_interval_td_cancels_opposite_errors() -> None:
+    q = torch.zeros(1, 2, 2)
+    y = torch.tensor([[[1.0, 0.0], [-1.0, 0.0]]])
+    w = torch.tensor([[[1.0, 0.0], [1.0, 0.0]]])
+    torch.testing.assert_close(preference_interval_td(q, y, w), torch.tensor([0.0]))
+    torch.testing.assert_close(preference_interval_td(q, -y[:, :1], w[:, :1]), torch.tensor([-1.0]))
+
+
+# ------------------------------------------------------------------------------------------- eq. 6-7
+def test_mutual_information_bonus() -> None:
+    log_q = torch.log(torch.tensor([0.5, 0.1, 0.02]))
+    log_p = torch.log(torch.tensor([0.1, 0.1, 0.1]))
+    bonus = mutual_information_bonus(log_q, log_p)
+    torch.testing.assert_close(bonus, torch.tensor([math.log(5.0), 0.0, math.log(0.2)]))
+
+
+def test_priority_hand_values_with_bonus_and_clipping() -> None:
+    td = torch.tensor([0.25, -2.0, 0.5])
+    bonus = torch.tensor([1.0, 0.5, -10.0])
+    p = priority(td, bonus, alpha=0.1, eps=0.01)
+    # |td| + 0.1 * bonus = [0.35, 2.05, -0.5] -> clip at 0 -> + 0.01
+    torch.testing.assert_close(p, torch.tensor([0.36, 2.06, 0.01]))
+
+
+def test_priority_without_discriminator() -> None:
+    td = torch.tensor([0.25, -2.0, 0.5, 0.0])
+    p = priority(td, None, alpha=0.1, eps=0.01)
+    torch.testing.assert_close(p, torch.tensor([0.26, 2.01, 0.51, 0.01]))
+
+
+def test_priority_alpha_zero_ignores_bonus() -> None:
+    td = torch.tensor([-0.3, 0.7])
+    p = priority(td, torch.tensor([-100.0, 100.0]), alpha=0.0, eps=1e-3)
+    torch.testing.assert_close(p, torch.tensor([0.301, 0.701]))

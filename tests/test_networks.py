@@ -1,0 +1,205 @@
+"""Tests of mope.networks: observation encoding, the multi-head Q-network and the preference discriminator."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from torch import nn
+
+from mope.errors import EnvironmentError_
+from mope.networks import Discriminator, ObsEncoder, QNetwork, mlp
+
+
+@pytest.fixture(autouse=True)
+def one_torch_thread() -> Iterator[None]:
+    # These networks are tiny; with a second intra-op thread on a busy 2-core machine torch spends its time
+    # spinning (300 Adam steps: 0.3 s with one thread, 30+ s with two).
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+DST_SPACE = gym.spaces.Box(low=0, high=11, shape=(2,), dtype=np.int32)
+
+
+def linears(module: nn.Module) -> list[nn.Linear]:
+    return [m for m in module.modules() if isinstance(m, nn.Linear)]
+
+
+# ------------------------------------------------------------------------------------------- ObsEncoder
+def test_encoder_scales_bounded_box_to_unit_interval() -> None:
+    enc = ObsEncoder(gym.spaces.Box(low=np.float32([0.0, -1.0]), high=np.float32([10.0, 1.0]), dtype=np.float32))
+    assert enc.out_dim == 2
+    x = torch.tensor([[0.0, -1.0], [5.0, 0.0], [10.0, 1.0], [2.5, 0.5]])
+    torch.testing.assert_close(enc(x), torch.tensor([[0.0, 0.0], [0.5, 0.5], [1.0, 1.0], [0.25, 0.75]]))
+
+
+def test_encoder_scales_integer_box() -> None:
+    enc = ObsEncoder(DST_SPACE)
+    out = enc(torch.tensor([[0, 0], [11, 5], [3, 11]], dtype=torch.int32))
+    assert out.dtype == torch.float32
+    torch.testing.assert_close(out, torch.tensor([[0.0, 0.0], [1.0, 5 / 11], [3 / 11, 1.0]]))
+
+
+def test_encoder_flattens_multidimensional_box() -> None:
+    enc = ObsEncoder(gym.spaces.Box(low=0.0, high=2.0, shape=(2, 3), dtype=np.float32))
+    assert enc.out_dim == 6
+    x = torch.arange(12, dtype=torch.float32).reshape(2, 2, 3) / 6.0
+    torch.testing.assert_close(enc(x), x.reshape(2, 6) / 2.0)
+
+
+def test_encoder_one_hot_for_discrete() -> None:
+    enc = ObsEncoder(gym.spaces.Discrete(4))
+    assert enc.out_dim == 4
+    out = enc(torch.tensor([0, 3, 1]))
+    torch.testing.assert_close(out, torch.tensor([[1.0, 0, 0, 0], [0, 0, 0, 1.0], [0, 1.0, 0, 0]]))
+    # observations arriving as (B, 1) floats are encoded the same way
+    torch.testing.assert_close(enc(torch.tensor([[0.0], [3.0], [1.0]])), out)
+
+
+def test_encoder_one_hot_respects_discrete_start() -> None:
+    enc = ObsEncoder(gym.spaces.Discrete(3, start=5))
+    torch.testing.assert_close(enc(torch.tensor([5, 7, 6])), torch.tensor([[1.0, 0, 0], [0, 0, 1.0], [0, 1.0, 0]]))
+
+
+def test_encoder_passes_unbounded_box_through() -> None:
+    enc = ObsEncoder(gym.spaces.Box(low=-np.inf, high=np.inf, shape=(3,), dtype=np.float32))
+    x = torch.tensor([[-100.0, 0.0, 12.5], [1.0, 2.0, 3.0]])
+    torch.testing.assert_close(enc(x), x)
+
+
+def test_encoder_mixed_bounds_scale_only_bounded_dims() -> None:
+    space = gym.spaces.Box(low=np.float32([0.0, -np.inf, 2.0]), high=np.float32([4.0, np.inf, 2.0]), dtype=np.float32)
+    enc = ObsEncoder(space)
+    # dim 0 bounded [0, 4] -> scaled; dim 1 unbounded -> unchanged; dim 2 degenerate (high == low) -> unchanged
+    x = torch.tensor([[1.0, -7.0, 2.0]])
+    torch.testing.assert_close(enc(x), torch.tensor([[0.25, -7.0, 2.0]]))
+
+
+@pytest.mark.parametrize(
+    "space",
+    [
+        gym.spaces.MultiDiscrete([2, 3]),
+        gym.spaces.Dict({"a": gym.spaces.Discrete(2)}),
+        gym.spaces.Tuple((gym.spaces.Discrete(2), gym.spaces.Discrete(3))),
+        gym.spaces.MultiBinary(4),
+    ],
+)
+def test_encoder_rejects_unsupported_space(space: gym.Space) -> None:
+    with pytest.raises(EnvironmentError_, match="not supported"):
+        ObsEncoder(space)
+    with pytest.raises(EnvironmentError_):
+        QNetwork(space, 4, 2)
+    with pytest.raises(EnvironmentError_):
+        Discriminator(space, 10)
+
+
+# ------------------------------------------------------------------------------------------- QNetwork
+def test_qnetwork_default_hidden_sizes_from_paper() -> None:
+    net = QNetwork(DST_SPACE, n_actions=4, n_objectives=2)
+    shapes = [(lin.in_features, lin.out_features) for lin in linears(net)]
+    # input: 2 encoded state features + 2 preference weights; output: |A| x m = 4 x 2
+    assert shapes == [(4, 64), (64, 128), (128, 128), (128, 64), (64, 8)]
+    assert sum(isinstance(mod, nn.ReLU) for mod in net.modules()) == 4
+
+
+def test_qnetwork_custom_hidden_and_discrete_obs() -> None:
+    net = QNetwork(gym.spaces.Discrete(5), n_actions=3, n_objectives=4, hidden=(16, 8))
+    assert [(lin.in_features, lin.out_features) for lin in linears(net)] == [(9, 16), (16, 8), (8, 12)]
+    q = net(torch.tensor([0, 4]), torch.full((2, 4), 0.25))
+    assert q.shape == (2, 3, 4)
+
+
+@pytest.mark.parametrize(("rows", "a", "m"), [(1, 4, 2), (7, 4, 2), (5, 2, 3), (3, 6, 6)])
+def test_qnetwork_output_shape(rows: int, a: int, m: int) -> None:
+    net = QNetwork(gym.spaces.Box(0.0, 1.0, (3,), dtype=np.float32), n_actions=a, n_objectives=m, hidden=(8, 8))
+    q = net(torch.rand(rows, 3), torch.softmax(torch.randn(rows, m), -1))
+    assert q.shape == (rows, a, m)
+
+
+def test_qnetwork_forward_features_equals_forward() -> None:
+    torch.manual_seed(0)
+    net = QNetwork(DST_SPACE, 4, 2, hidden=(16, 16))
+    obs = torch.tensor([[0, 0], [3, 2], [10, 9]], dtype=torch.int32)
+    w = torch.tensor([[1.0, 0.0], [0.3, 0.7], [0.5, 0.5]])
+    torch.testing.assert_close(net(obs, w), net.forward_features(net.encoder(obs), w))
+
+
+def test_qnetwork_depends_on_preference() -> None:
+    torch.manual_seed(0)
+    net = QNetwork(DST_SPACE, 4, 2)
+    obs = torch.tensor([[1, 1], [1, 1]], dtype=torch.int32)
+    q = net(obs, torch.tensor([[1.0, 0.0], [0.0, 1.0]]))
+    assert not torch.allclose(q[0], q[1])
+
+
+def test_qnetwork_heads_layout() -> None:
+    # Output unit a * m + j is the head of action a, objective j.
+    net = QNetwork(gym.spaces.Box(0.0, 1.0, (1,), dtype=np.float32), n_actions=3, n_objectives=2, hidden=(4,))
+    last = linears(net)[-1]
+    with torch.no_grad():
+        for lin in linears(net):
+            lin.weight.zero_()
+        last.bias.copy_(torch.arange(6, dtype=torch.float32))
+    q = net(torch.zeros(1, 1), torch.tensor([[0.5, 0.5]]))
+    torch.testing.assert_close(q[0], torch.tensor([[0.0, 1.0], [2.0, 3.0], [4.0, 5.0]]))
+
+
+def test_mlp_structure() -> None:
+    net = mlp(3, [5, 7], 2)
+    kinds = [type(mod).__name__ for mod in net]
+    assert kinds == ["Linear", "ReLU", "Linear", "ReLU", "Linear"]
+    assert mlp(3, [], 2)[0].in_features == 3
+
+
+# ------------------------------------------------------------------------------------------- Discriminator
+def test_discriminator_shapes() -> None:
+    d = Discriminator(DST_SPACE, n_cells=10)
+    assert [(lin.in_features, lin.out_features) for lin in linears(d)] == [(2, 64), (64, 64), (64, 10)]
+    obs = torch.tensor([[0, 0], [5, 5], [10, 10]], dtype=torch.int32)
+    assert d(obs).shape == (3, 10)
+    lp = d.log_prob(obs, torch.tensor([0, 9, 3]))
+    assert lp.shape == (3,)
+    assert (lp <= 0).all()
+    # log_prob is the log-softmax entry of the given cell
+    expected = torch.log_softmax(d(obs), 1)[torch.arange(3), torch.tensor([0, 9, 3])]
+    torch.testing.assert_close(lp, expected)
+    # the probabilities over all cells sum to 1
+    all_lp = torch.stack([d.log_prob(obs, torch.full((3,), c)) for c in range(10)], 1)
+    torch.testing.assert_close(all_lp.exp().sum(1), torch.ones(3))
+
+
+def test_discriminator_learns_to_separate_two_groups() -> None:
+    torch.manual_seed(0)
+    gen = torch.Generator().manual_seed(0)
+    space = gym.spaces.Box(low=-1.0, high=2.0, shape=(2,), dtype=np.float32)
+    d = Discriminator(space, n_cells=10)
+    opt = torch.optim.Adam(d.parameters(), lr=1e-2)
+
+    def batch(n: int) -> tuple[torch.Tensor, torch.Tensor]:
+        near0 = 0.1 * torch.randn(n, 2, generator=gen)
+        near1 = 1.0 + 0.1 * torch.randn(n, 2, generator=gen)
+        obs = torch.cat([near0, near1])
+        cells = torch.cat([torch.zeros(n, dtype=torch.long), torch.full((n,), 9, dtype=torch.long)])
+        return obs, cells
+
+    for _ in range(300):
+        obs, cells = batch(32)
+        loss = -d.log_prob(obs, cells).mean()
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+
+    obs, cells = batch(500)
+    with torch.no_grad():
+        pred = d(obs).argmax(1)
+        lp = d.log_prob(obs, cells)
+    assert (pred == cells).float().mean().item() > 0.95
+    assert lp.mean().item() > math.log(0.5)
+    assert (lp > math.log(0.5)).float().mean().item() > 0.95

@@ -236,23 +236,12 @@ def test_load_non_mapping_missing_file_and_bad_values(tmp_path: Path) -> None:
 
 
 # ------------------------------------------------------------------------------------------- known bugs
-@pytest.mark.xfail(
-    reason="BUG: Config.validate never checks the two exploration switches; a non-bool value such as the string "
-    "'false' (a quoted YAML value) builds a Config whose .algo / to_dict() then raise StopIteration",
-    strict=True,
-)
 @pytest.mark.parametrize("value", ["false", 2])
 def test_non_bool_exploration_switch_raises_config_error(value: object) -> None:
     with pytest.raises(ConfigError, match="experience_exploration"):
         Config.from_dict({"experience_exploration": value}).to_dict()
 
 
-@pytest.mark.xfail(
-    reason="BUG: wrong-typed values of non-int fields escape as TypeError/ValueError instead of ConfigError "
-    "(max_episode_steps: '100' -> TypeError in validate; hidden_sizes: 64 -> TypeError and hidden_sizes/ref_point "
-    "'abc' -> ValueError in __post_init__), so the CLI shows a traceback",
-    strict=True,
-)
 @pytest.mark.parametrize(
     "data",
     [{"max_episode_steps": "100"}, {"hidden_sizes": 64}, {"hidden_sizes": "abc"}, {"ref_point": "abc"}],

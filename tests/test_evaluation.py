@@ -218,12 +218,6 @@ def test_solutions_time_limit(dst) -> None:  # noqa: ANN001
     assert sols.lengths.tolist() == [100]
 
 
-@pytest.mark.xfail(
-    reason="BUG: DeepSeaTreasureBatch.__init__ calls env.unwrapped.reset() on the caller's environment, so "
-    "solutions()/Evaluator.evaluate() move a running episode back to the start, although they document the env "
-    "as 'copied; it is not stepped'",
-    strict=True,
-)
 def test_solutions_leaves_the_callers_env_alone() -> None:
     env = make("deep-sea-treasure-v0")
     env.reset(seed=0)

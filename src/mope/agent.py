@@ -57,6 +57,23 @@ def linear_schedule(start: float, end: float, duration: int, step: int) -> float
     return start + frac * (end - start)
 
 
+def return_bounds(env: gym.Env, gamma: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per-objective bounds of any discounted return, from the environment's ``reward_space``.
+
+    A return has at least one reward, so with per-step rewards in ``[lo, hi]``: it is at least ``lo`` when
+    ``lo >= 0`` and at least ``lo / (1 - gamma)`` otherwise; symmetrically for the upper bound. Infinite bounds
+    stay infinite (no clamping). On Deep-Sea-Treasure the time objective gets ``[-1/(1-gamma), -1]``.
+    """
+    space = env.unwrapped.reward_space
+    lo = np.asarray(space.low, dtype=np.float64).reshape(-1)
+    hi = np.asarray(space.high, dtype=np.float64).reshape(-1)
+    horizon = 1.0 / (1.0 - gamma) if gamma < 1 else np.inf
+    with np.errstate(invalid="ignore", over="ignore"):
+        q_lo = np.where(lo >= 0, lo, lo * horizon)
+        q_hi = np.where(hi <= 0, hi, hi * horizon)
+    return np.nan_to_num(q_lo, nan=-np.inf), np.nan_to_num(q_hi, nan=np.inf)
+
+
 class MoPE:
     """Multi-objective RL with Preference Exploration (and its ablations, including plain EQL).
 
@@ -108,6 +125,9 @@ class MoPE:
                                                cfg.disc_hidden).to(self.device)
             self.disc_optimizer = torch.optim.Adam(self.discriminator.parameters(), lr=cfg.disc_learning_rate)
 
+        self.q_low, self.q_high = return_bounds(self.env, cfg.gamma)
+        self._q_low_t = torch.as_tensor(self.q_low, dtype=torch.float32, device=self.device)
+        self._q_high_t = torch.as_tensor(self.q_high, dtype=torch.float32, device=self.device)
         obs_dtype = np.float32 if not isinstance(spec.obs_space, gym.spaces.Discrete) else np.int64
         self.buffer = ReplayBuffer(cfg.buffer_size, self.obs_shape, self.m, cfg.per, obs_dtype)
         self.global_step = 0
@@ -211,6 +231,8 @@ class MoPE:
             next_feats = self.target_net.encoder(next_obs)
             y = envelope_target(self.target_net, next_feats, rewards, terminated, w, self.envelope_set(w, acting),
                                 c.gamma, select_net=self.q_net if c.double_q else None)
+            if c.clip_targets:
+                y = torch.maximum(torch.minimum(y, self._q_high_t), self._q_low_t)
 
         feats = self.q_net.encoder(obs)
         feats_rows = feats.unsqueeze(1).expand(b, n, feats.shape[1]).reshape(b * n, -1)

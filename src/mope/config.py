@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -67,6 +68,9 @@ class Config:
     #: Pick (a*, w'*) of the envelope target with the online network, read the value from the target network
     #: (double Q-learning). Not in the paper; see docs/design.md for why it is on by default.
     double_q: bool = True
+    #: Clamp the targets y to the range of returns the reward bounds allow (reward_space low/high and gamma).
+    #: Not in the paper; see docs/design.md.
+    clip_targets: bool = True
     epsilon_start: float = 1.0
     epsilon_end: float = 0.05
     epsilon_decay_steps: int = 10_000
@@ -107,11 +111,42 @@ class Config:
     extra: dict[str, Any] = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
-        self.hidden_sizes = tuple(int(h) for h in self.hidden_sizes)
-        self.disc_hidden = tuple(int(h) for h in self.disc_hidden)
+        self._check_types()
+        self.hidden_sizes = tuple(self.hidden_sizes)
+        self.disc_hidden = tuple(self.disc_hidden)
         if self.ref_point is not None:
             self.ref_point = tuple(float(x) for x in self.ref_point)
         self.validate()
+
+    def _check_types(self) -> None:
+        """Raise :class:`ConfigError` for a value of the wrong type (a quoted number, a bool for a count, ...)."""
+
+        def is_int(x: Any) -> bool:
+            return isinstance(x, int) and not isinstance(x, bool)
+
+        def is_num(x: Any) -> bool:
+            return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+        checks: dict[str, tuple[Callable[[Any], bool], str]] = {
+            "int": (is_int, "an integer"),
+            "float": (is_num, "a number"),
+            "bool": (lambda x: isinstance(x, bool), "true or false"),
+            "str": (lambda x: isinstance(x, str), "a string"),
+            "int | None": (lambda x: x is None or is_int(x), "an integer or null"),
+            "float | None": (lambda x: x is None or is_num(x), "a number or null"),
+            "tuple[int, ...]": (lambda x: isinstance(x, (list, tuple)) and all(is_int(v) for v in x),
+                                "a list of integers"),
+            "tuple[float, ...] | None": (lambda x: x is None or (isinstance(x, (list, tuple))
+                                                                and all(is_num(v) for v in x)),
+                                         "a list of numbers or null"),
+        }
+        for f in dataclasses.fields(self):
+            if f.type not in checks:
+                continue
+            ok, what = checks[f.type]
+            value = getattr(self, f.name)
+            if not ok(value):
+                raise ConfigError(f"{f.name}={value!r} is not {what}")
 
     # ------------------------------------------------------------------------------------------------------
     @property
@@ -221,10 +256,8 @@ class Config:
         types = {f.name: f.type for f in dataclasses.fields(cls)}
         for key, value in data.items():
             # ints given as floats ("20000.0") and bools given as ints are user slips: coerce where lossless.
-            if types[key] == "int" and isinstance(value, float) and value.is_integer():
+            if types[key] in ("int", "int | None") and isinstance(value, float) and value.is_integer():
                 data[key] = int(value)
-            if types[key] == "int" and not isinstance(data[key], int):
-                raise ConfigError(f"{key}={value!r} is not an integer")
         return cls(**data)
 
     def save(self, path: str | Path) -> None:

@@ -46,7 +46,8 @@ def equally_spaced(m: int, n: int) -> np.ndarray:
     """Equally spaced preferences on the simplex.
 
     For ``m == 2`` this is ``n`` points ``(w, 1 - w)`` with ``w`` on ``linspace(0, 1, n)``. For ``m > 2`` it is
-    the Das-Dennis simplex lattice (via pymoo) with the most divisions whose size does not exceed ``n``.
+    the Das-Dennis simplex lattice (via pymoo) with the most divisions whose size does not exceed ``n``; the
+    coarsest lattice is the ``m`` vertices, returned even when ``n < m``.
 
     Args:
         m: Number of objectives.
@@ -120,9 +121,10 @@ def sample_neighbours(centers: np.ndarray, n: int, sigma: float, rng: np.random.
     Each neighbour is ``center + r * u`` with ``u`` a uniform unit direction in the simplex's plane
     (entries summing to 0) and ``r = sigma * U^(1/(m-1))``, i.e. uniform in the (m-1)-ball around the
     center. A candidate that leaves the simplex is redrawn (up to 4 tries, vectorised); if all tries leave
-    it, the step is shortened to the simplex boundary. So every result lies on the simplex and within
-    ``sigma`` of its center; it is exactly uniform on the ball-simplex intersection except in the rare
-    shortened case near a vertex.
+    it (only near the boundary), the last candidate is reflected back across the facets it crossed. Reflection
+    across a facet never moves a point farther from a center inside the simplex, so every result lies on the
+    simplex and within ``sigma`` of its center. The result is exactly uniform on the ball-simplex intersection
+    away from the boundary and close to uniform near it (nothing piles up on the center).
 
     Args:
         centers: ``(B, m)`` preferences on the simplex.
@@ -144,16 +146,15 @@ def sample_neighbours(centers: np.ndarray, n: int, sigma: float, rng: np.random.
     r = sigma * rng.random(size=(tries, b, n, 1)) ** (1.0 / (m - 1))
     cand = centers[None, :, None, :] + r * u
     valid = np.all(cand >= 0.0, axis=-1)  # (tries, b, n)
-    first = np.argmax(valid, axis=0)  # first valid try, 0 if none
+    first = np.where(valid.any(axis=0), np.argmax(valid, axis=0), tries - 1)  # first valid try, else the last
     pick = np.take_along_axis(cand, first[None, ..., None], axis=0)[0]
-    # no valid try: shorten the first try's step so it stops on the simplex boundary
-    none_valid = ~valid.any(axis=0)
-    if none_valid.any():
-        c = np.broadcast_to(centers[:, None, :], (b, n, m))[none_valid]
-        step = (r[0] * u[0])[none_valid]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.where(step < 0, c / -step, np.inf).min(axis=-1, keepdims=True)
-        pick[none_valid] = c + np.minimum(t, 1.0) * step
+    for _ in range(2 * m):  # reflect across the most violated facet x_k = 0 until inside (a few rounds at most)
+        k = np.argmin(pick, axis=-1)
+        low = np.take_along_axis(pick, k[..., None], axis=-1)  # (b, n, 1)
+        if np.all(low >= 0):
+            break
+        normal = np.eye(m)[k] - 1.0 / m  # facet normal within the simplex plane
+        pick = np.where(low < 0, pick - 2.0 * low / (1.0 - 1.0 / m) * normal, pick)
     pick = np.clip(pick, 0.0, None)
     return pick / pick.sum(axis=-1, keepdims=True)
 
@@ -204,6 +205,8 @@ class PreferencePartition:
 
     def sample_in_cell(self, cell: int, rng: np.random.Generator) -> np.ndarray:
         """One preference uniform inside ``cell``."""
+        if not 0 <= cell < self.n_cells:
+            raise PreferenceError(f"cell {cell} is out of range: this partition has cells 0..{self.n_cells - 1}")
         if self.m == 1:
             return np.ones(1)
         if self.m == 2:

@@ -7,6 +7,7 @@ observation space and a vector reward works without code changes.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import gymnasium as gym
@@ -14,6 +15,9 @@ import mo_gymnasium as mo_gym
 import numpy as np
 
 from mope.errors import EnvironmentError_, suggest
+
+# MO-Gymnasium's own spaces trip this Gymnasium warning on every make(); it says nothing about the user's input.
+warnings.filterwarnings("ignore", message=".*precision lowered by casting.*")
 
 #: Hypervolume reference points used in the MORL literature (morl-baselines' examples) for known envs.
 KNOWN_REF_POINTS: dict[str, tuple[float, ...]] = {
@@ -73,7 +77,7 @@ def check_env_fits(env: gym.Env, env_id: str | None = None) -> EnvSpec:
     if not isinstance(env.action_space, gym.spaces.Discrete):
         raise EnvironmentError_(
             f"environment '{name}' has a continuous action space {env.action_space}; EQL/MoPE need discrete actions "
-            "(wrap it with mope.envs.DiscreteActions or use an environment with a Discrete action space)"
+            "(discretise it with an action wrapper, or use an environment with a Discrete action space)"
         )
     if not isinstance(env.observation_space, (gym.spaces.Box, gym.spaces.Discrete)):
         raise EnvironmentError_(

@@ -54,7 +54,7 @@ class DeepSeaTreasureBatch:
     MOVES = np.array([[-1, 0], [1, 0], [0, -1], [0, 1]], dtype=np.int64)  # up, down, left, right
 
     def __init__(self, env: gym.Env, n: int) -> None:
-        base = env.unwrapped
+        base = copy.deepcopy(env.unwrapped)  # never touch the caller's episode
         self.n = n
         self.map = np.asarray(base.sea_map, dtype=np.float64)
         self.float_state = bool(base.float_state)

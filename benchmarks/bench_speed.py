@@ -1,0 +1,97 @@
+"""Speed benchmark: seconds per 1k training steps and seconds per 2,000-preference evaluation on Deep-Sea-Treasure.
+
+Usage::
+
+    .venv/bin/python benchmarks/bench_speed.py [--steps 1000] [--repeats 3] [--out benchmarks/results/speed.md]
+
+It warms each agent up past ``learning_starts`` (so every timed step includes a gradient update), then times
+``--steps`` training steps, ``--repeats`` times, and reports the median. The evaluation is timed on the same
+agent with the paper's protocol (2,000 uniform preferences plus 100 equally spaced ones for EUM). The machine
+(CPU model, cores, torch threads, versions) is printed with the table. Run it on an otherwise idle machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import time
+from pathlib import Path
+
+import torch
+
+import mope
+from mope import Evaluator, make_env
+
+
+def cpu_model() -> str:
+    """CPU model name from /proc/cpuinfo, else the platform string."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def time_training(algo: str, steps: int, repeats: int, **overrides) -> float:
+    """Median seconds per ``steps`` training steps (after a warm-up that fills the buffer)."""
+    agent = mope.make_agent(algo, "deep-sea-treasure-v0", seed=0, **overrides)
+    agent.train(agent.config.learning_starts + 100)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        agent.train(steps)
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def time_evaluation(repeats: int) -> float:
+    """Median seconds for one 2,000-preference evaluation."""
+    agent = mope.make_agent("eql", "deep-sea-treasure-v0", seed=0)
+    agent.train(500)
+    evaluator = Evaluator(make_env("deep-sea-treasure-v0"), "deep-sea-treasure-v0", n_prefs=2000)
+    evaluator.evaluate(agent)  # warm-up
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        evaluator.evaluate(agent)
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=1000)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--out", type=Path, default=None)
+    args = parser.parse_args()
+
+    rows = []
+    for algo in ("eql", "mope"):
+        s = time_training(algo, args.steps, args.repeats)
+        rows.append((f"`{algo}` training, paper settings (B=32, N_omega=64)", s * 1000 / args.steps, "s / 1k steps"))
+    ratio = rows[1][1] / rows[0][1]
+    ev = time_evaluation(args.repeats)
+    rows.append(("one evaluation, 2,000 uniform + 100 equally spaced preferences", ev, "s"))
+
+    lines = [
+        f"Machine: {cpu_model()}, {os.cpu_count()} cores, torch {torch.__version__} "
+        f"({torch.get_num_threads()} threads), Python {platform.python_version()}",
+        "",
+        "| what | value | unit |",
+        "|---|---:|---|",
+        *[f"| {name} | {value:.3f} | {unit} |" for name, value, unit in rows],
+        f"| ratio mope / eql per step | {ratio:.2f} | |",
+    ]
+    text = "\n".join(lines)
+    print(text)
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(text + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -150,6 +150,35 @@ def act(
     typer.echo(f"length: {int(sols.lengths[0])}{'' if sols.terminated[0] else ' (time limit)'}")
 
 
+reproduce_app = typer.Typer(no_args_is_help=True, help="Reproduce the paper's experiments.")
+app.add_typer(reproduce_app, name="reproduce")
+
+
+@reproduce_app.command("dst")
+def reproduce_dst_cmd(
+    out: Annotated[Path, typer.Option(help="Output folder (runs, figures, table).")] = Path("runs/reproduce-dst"),
+    seeds: Annotated[int, typer.Option(help="Seeds per variant (the paper-scale run: 10).")] = 3,
+    steps: Annotated[int, typer.Option(help="Environment steps per run.")] = 20_000,
+    eval_every: Annotated[int, typer.Option(help="Evaluate CR every N steps.")] = 1000,
+    algos: Annotated[str, typer.Option(help="Comma-separated variants.")] = "eql,ee,pe,mope",
+    workers: Annotated[int, typer.Option(help="Parallel training processes.")] = 2,
+    set_: Annotated[list[str] | None, typer.Option("--set", help="Config override for every run: KEY=VALUE.")] = None,
+    progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
+) -> None:
+    """Fig. 2 and Fig. 3 of the paper on Deep-Sea-Treasure: four variants x seeds, figures and a table."""
+    from mope.reproduce import reproduce_dst
+
+    try:
+        res = reproduce_dst(out, seeds=seeds, steps=steps, eval_every=eval_every,
+                            algos=tuple(a.strip() for a in algos.split(",") if a.strip()), workers=workers,
+                            progress=progress, **_parse_sets(set_ or []))
+    except MopeError as exc:
+        _fail(str(exc))
+        return
+    typer.echo(res["table"])
+    typer.echo(f"figures and table in {res['out']} (training wall time {res['train_wall_s']:.0f} s)")
+
+
 @app.command()
 def envs() -> None:
     """List MO-Gymnasium environments mope's agents can use directly (discrete actions)."""

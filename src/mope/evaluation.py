@@ -40,10 +40,19 @@ class Solutions:
     discounted: np.ndarray  #: ``(n, m)`` discounted return vectors
     lengths: np.ndarray  #: ``(n,)`` episode lengths
     terminated: np.ndarray  #: ``(n,)`` False where the episode hit the time limit
+    #: ``(n, T + 1, *obs_shape)`` visited observations (after the end, the last one repeats); only with
+    #: ``record_obs=True``
+    observations: np.ndarray | None = None
+
+    def subset(self, idx: slice | np.ndarray) -> Solutions:
+        """The rows ``idx`` of every field."""
+        obs = None if self.observations is None else self.observations[idx]
+        return Solutions(self.prefs[idx], self.returns[idx], self.discounted[idx], self.lengths[idx],
+                         self.terminated[idx], obs)
 
 
 def solutions(agent: GreedyPolicy, env: gym.Env, prefs: np.ndarray, gamma: float,
-              max_steps: int | None = None, seed: int = 0) -> Solutions:
+              max_steps: int | None = None, seed: int = 0, record_obs: bool = False) -> Solutions:
     """Play one greedy episode per preference, all episodes batched.
 
     Args:
@@ -53,6 +62,7 @@ def solutions(agent: GreedyPolicy, env: gym.Env, prefs: np.ndarray, gamma: float
         gamma: Discount factor for ``discounted``.
         max_steps: Time limit; default the environment's registered limit, else 1000.
         seed: Reset seed of the first copy (copy ``i`` uses ``seed + i``) for stochastic environments.
+        record_obs: Also return every visited observation (for path and diversity analyses).
 
     Returns:
         A :class:`Solutions`.
@@ -71,6 +81,7 @@ def solutions(agent: GreedyPolicy, env: gym.Env, prefs: np.ndarray, gamma: float
     terminated = np.zeros(n, dtype=bool)
     running = np.arange(n)
     discount = 1.0
+    history = [obs.copy()] if record_obs else None
     for _ in range(max_steps):
         actions = agent.greedy_actions(obs[running], prefs[running])
         next_obs, rew, term = batch.step(running, actions)
@@ -81,9 +92,12 @@ def solutions(agent: GreedyPolicy, env: gym.Env, prefs: np.ndarray, gamma: float
         terminated[running] = term
         running = running[~term]
         discount *= gamma
+        if history is not None:
+            history.append(obs.copy())
         if running.size == 0:
             break
-    return Solutions(prefs, returns, discounted, lengths, terminated)
+    observations = np.stack(history, axis=1) if history is not None else None
+    return Solutions(prefs, returns, discounted, lengths, terminated, observations)
 
 
 class Evaluator:
@@ -112,7 +126,7 @@ class Evaluator:
         self.ref_point = (np.asarray(ref_point, dtype=np.float64) if ref_point is not None
                           else default_ref_point(env, env_id, gamma, self.max_steps))
 
-    def evaluate(self, agent: GreedyPolicy) -> tuple[dict[str, float], Solutions]:
+    def evaluate(self, agent: GreedyPolicy, record_obs: bool = False) -> tuple[dict[str, float], Solutions]:
         """Roll out every preference greedily and compute the metrics.
 
         Returns:
@@ -121,9 +135,9 @@ class Evaluator:
             limit; and the uniform-set :class:`Solutions`.
         """
         all_prefs = np.concatenate([self.prefs, self.eum_prefs])
-        sols = solutions(agent, self.env, all_prefs, self.gamma, self.max_steps)
+        sols = solutions(agent, self.env, all_prefs, self.gamma, self.max_steps, record_obs=record_obs)
         n = len(self.prefs)
-        uni = Solutions(sols.prefs[:n], sols.returns[:n], sols.discounted[:n], sols.lengths[:n], sols.terminated[:n])
+        uni = sols.subset(slice(0, n))
         result = metrics.evaluate_front(uni.discounted, uni.prefs, true_front=self.front, ref_point=self.ref_point)
         eq = metrics.evaluate_front(sols.discounted[n:], sols.prefs[n:], true_front=self.front)
         result["eum"] = eq["eum"]

@@ -1,0 +1,187 @@
+"""``mope reproduce dst``: the paper's Deep-Sea-Treasure experiment (Fig. 2, Fig. 3) over several seeds.
+
+Trains the four variants (``eql``, ``ee``, ``pe``, ``mope``) for the same number of steps and seeds, each
+into its own run folder (a finished run is reused, so an interrupted reproduction resumes where it stopped),
+then writes into the output folder:
+
+* ``fig2a_cr.png`` -- CR against steps, mean and 95% confidence band per variant;
+* ``fig2a_optimal_share.png`` and ``fig2a_timeouts.png`` -- the same for the two metrics that keep CR honest;
+* ``fig2b_front.png`` -- the true discounted CCS and the solutions each variant recovered (seed 0);
+* ``fig3a_preferences.png`` -- weight on treasure against the solution found, beside the optimal one;
+* ``fig3b_discriminator.png`` -- the discriminator's predicted preference over the grid (EE and MoPE);
+* ``table.md`` and ``results.json`` -- final CR (mean +- std), steps until CR first reaches 1.0, HV, EUM and
+  its gap, optimal share, time-outs, and strategy diversity (distinct optimal routes per treasure, I(S; C)).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mope.config import ALGOS, Config
+from mope.errors import ConfigError
+
+DST = "deep-sea-treasure-v0"
+
+
+def _run_one(config_dict: dict[str, Any], out_dir: str) -> str:
+    """Worker: train one (variant, seed) unless its folder already holds a finished run."""
+    from mope.experiments import train_run
+
+    out = Path(out_dir)
+    if (out / "summary.json").is_file() and (out / "checkpoints" / "final.pt").is_file():
+        return out_dir
+    train_run(Config.from_dict(config_dict), out, progress=False, overwrite=True)
+    return out_dir
+
+
+def run_trials(configs: dict[str, Config], out: Path, workers: int, progress: bool = True) -> None:
+    """Run every config into ``out/<name>`` with a local process pool and a progress bar."""
+    from tqdm.auto import tqdm
+
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        futures = {pool.submit(_run_one, cfg.to_dict(), str(out / name)): name for name, cfg in configs.items()}
+        with tqdm(total=len(futures), desc="trials", disable=not progress, unit="run") as bar:
+            for fut in as_completed(futures):
+                fut.result()
+                bar.update(1)
+                bar.set_postfix_str(futures[fut])
+
+
+def steps_to_full_coverage(rows: list[dict[str, float]]) -> float:
+    """First evaluation step with CR = 1, or NaN if never."""
+    for r in rows:
+        if r["cr"] >= 1.0 - 1e-9:
+            return r["step"]
+    return float("nan")
+
+
+def discriminator_map(agent: Any) -> np.ndarray | None:
+    """E[w_treasure | s] under the agent's discriminator at every DST cell (NaN on rock)."""
+    import torch
+
+    if agent.discriminator is None:
+        return None
+    sea = np.asarray(agent.env.unwrapped.sea_map)
+    rows, cols = np.indices(sea.shape)
+    obs = torch.as_tensor(np.stack([rows.ravel(), cols.ravel()], axis=1), dtype=torch.float32)
+    centers = (np.arange(agent.pref_sampler.partition.n_cells) + 0.5) / agent.pref_sampler.partition.n_cells
+    with torch.no_grad():
+        probs = torch.softmax(agent.discriminator(obs), dim=1).numpy()
+    grid = (probs @ centers).reshape(sea.shape)
+    grid[sea == -10] = np.nan
+    return grid
+
+
+def analyse_run(run_dir: Path, n_prefs: int) -> dict[str, Any]:
+    """Final evaluation of a run with recorded paths: metrics, diversity, and what the figures need."""
+    from mope.agent import MoPE
+    from mope.diversity import distinct_paths, state_preference_mi
+    from mope.evaluation import Evaluator
+    from mope.metrics import convex_coverage_set
+
+    agent = MoPE.load(run_dir / "checkpoints" / "final.pt")
+    c = agent.config
+    ev = Evaluator(agent.env, c.env_id, c.gamma, n_prefs, c.seed, c.max_episode_steps, c.ref_point)
+    res, sols = ev.evaluate(agent, record_obs=True)
+    ccs = convex_coverage_set(ev.front)
+    best = ccs[np.argmax(sols.prefs @ ccs.T, axis=1)]
+    cells = agent.pref_sampler.partition.cell_of(sols.prefs)
+    div = distinct_paths(sols.observations, sols.lengths, sols.discounted, ccs)
+    return {"metrics": res, "paths": div, "mi": state_preference_mi(sols.observations, sols.lengths, cells),
+            "prefs": sols.prefs, "found": sols.discounted, "best": best, "ccs": ccs,
+            "disc_map": discriminator_map(agent), "sea_map": np.asarray(agent.env.unwrapped.sea_map)}
+
+
+def reproduce_dst(out: str | Path, seeds: int = 3, steps: int = 20_000, eval_every: int = 1000,
+                  algos: tuple[str, ...] = ("eql", "ee", "pe", "mope"), workers: int = 2, progress: bool = True,
+                  **overrides: Any) -> dict[str, Any]:
+    """Train, evaluate and plot the DST experiment; see the module docstring for the outputs."""
+    from mope.experiments import read_metrics
+    from mope.plots import (
+        markdown_table,
+        plot_curves,
+        plot_discriminator_maps,
+        plot_fronts,
+        plot_preference_solutions,
+    )
+
+    for a in algos:
+        if a not in ALGOS:
+            raise ConfigError(f"unknown algorithm '{a}'; choose from {', '.join(ALGOS)}")
+    if seeds < 1 or steps < 1 or workers < 1:
+        raise ConfigError(f"seeds={seeds}, steps={steps} and workers={workers} must all be >= 1")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    configs = {f"{a}/seed_{s}": Config.for_algo(a, env_id=DST, seed=s, total_steps=steps, eval_every=eval_every,
+                                                **overrides)
+               for a in algos for s in range(seeds)}
+    t0 = time.perf_counter()
+    run_trials(configs, out, workers, progress)
+    train_wall = time.perf_counter() - t0
+
+    n_prefs = next(iter(configs.values())).eval_prefs
+    results: dict[str, Any] = {}
+    curves: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]] = {"cr": {}, "optimal_share": {}, "timeout_share": {}}
+    analyses: dict[str, dict[str, Any]] = {}
+    for a in algos:
+        metric_rows = [read_metrics(out / a / f"seed_{s}") for s in range(seeds)]
+        n = min(len(r) for r in metric_rows)
+        step_axis = np.array([r["step"] for r in metric_rows[0][:n]])
+        for key in curves:
+            curves[key][a] = (step_axis, np.array([[r[key] for r in rows[:n]] for rows in metric_rows]))
+        runs = [analyse_run(out / a / f"seed_{s}", n_prefs) for s in range(seeds)]
+        analyses[a] = runs[0]
+        fin = {k: np.array([r["metrics"][k] for r in runs]) for k in
+               ("cr", "hv", "eum", "eum_optimal", "eum_gap", "optimal_share", "timeout_share")}
+        t_full = np.array([steps_to_full_coverage(rows) for rows in metric_rows])
+        results[a] = {
+            **{k: {"mean": float(v.mean()), "std": float(v.std())} for k, v in fin.items()},
+            "steps_to_cr1": {"median": float(np.nanmedian(t_full)) if np.any(~np.isnan(t_full)) else None,
+                             "reached": int(np.sum(~np.isnan(t_full))), "seeds": seeds},
+            "paths_per_solution": float(np.mean([r["paths"]["paths_per_solution"] for r in runs])),
+            "mi_state_pref": float(np.mean([r["mi"] for r in runs])),
+            "s_per_1k_steps": float(np.mean([json.loads((out / a / f"seed_{s}" / "summary.json").read_text())
+                                             ["s_per_1k_steps"] for s in range(seeds)])),
+        }
+
+    plot_curves(curves["cr"], out / "fig2a_cr.png")
+    plot_curves(curves["optimal_share"], out / "fig2a_optimal_share.png", ylabel="optimal share",
+                title="Share of preferences whose return is their own optimum (mean, 95% CI)")
+    plot_curves(curves["timeout_share"], out / "fig2a_timeouts.png", ylabel="time-out share",
+                title="Share of preferences that loop until the time limit (mean, 95% CI)")
+    first = analyses[algos[0]]
+    plot_fronts(first["ccs"], {a: np.unique(np.round(analyses[a]["found"], 3), axis=0) for a in algos},
+                out / "fig2b_front.png")
+    plot_preference_solutions({a: (analyses[a]["prefs"], analyses[a]["found"], analyses[a]["best"])
+                               for a in algos if a in ("eql", "mope")} or
+                              {a: (analyses[a]["prefs"], analyses[a]["found"], analyses[a]["best"]) for a in algos},
+                              first["ccs"], out / "fig3a_preferences.png")
+    maps = {a: analyses[a]["disc_map"] for a in algos if analyses[a]["disc_map"] is not None}
+    if maps:
+        plot_discriminator_maps(maps, first["sea_map"], out / "fig3b_discriminator.png")
+
+    def pm(d: dict[str, float], fmt: str = ".3f") -> str:
+        return f"{d['mean']:{fmt}} ± {d['std']:{fmt}}"
+
+    header = ["variant", "final CR", "steps to CR = 1 (median; seeds)", "HV", "EUM (optimum)", "optimal share",
+              "time-outs", "routes per treasure", "I(S; C) nats", "s / 1k steps"]
+    rows = []
+    for a in algos:
+        r = results[a]
+        t = r["steps_to_cr1"]
+        rows.append([a, pm(r["cr"]), f"{t['median']:.0f} ({t['reached']}/{t['seeds']})" if t["median"] else
+                     f"never (0/{t['seeds']})", pm(r["hv"], ".1f"),
+                     f"{pm(r['eum'], '.2f')} ({r['eum_optimal']['mean']:.2f})", pm(r["optimal_share"]),
+                     pm(r["timeout_share"]), f"{r['paths_per_solution']:.2f}", f"{r['mi_state_pref']:.3f}",
+                     f"{r['s_per_1k_steps']:.1f}"])
+    table = markdown_table(header, rows)
+    (out / "table.md").write_text(table + "\n")
+    (out / "results.json").write_text(json.dumps({"results": results, "seeds": seeds, "steps": steps,
+                                                  "train_wall_s": train_wall, "overrides": overrides}, indent=2))
+    return {"results": results, "table": table, "out": out, "train_wall_s": train_wall}

@@ -203,3 +203,22 @@ def test_discriminator_learns_to_separate_two_groups() -> None:
     assert (pred == cells).float().mean().item() > 0.95
     assert lp.mean().item() > math.log(0.5)
     assert (lp > math.log(0.5)).float().mean().item() > 0.95
+
+
+def test_onehot_encoding_of_an_integer_box() -> None:
+    from mope.networks import ObsEncoder
+
+    space = gym.spaces.Box(low=0, high=3, shape=(2,), dtype=np.int32)
+    enc = ObsEncoder(space, "onehot")
+    assert enc.out_dim == 8
+    out = enc(torch.tensor([[0, 3], [2, 1]]))
+    expected = torch.tensor([[1, 0, 0, 0, 0, 0, 0, 1], [0, 0, 1, 0, 0, 1, 0, 0]], dtype=torch.float32)
+    assert torch.equal(out, expected)
+
+
+def test_onehot_encoding_refuses_a_float_box() -> None:
+    from mope.errors import EnvironmentError_
+    from mope.networks import ObsEncoder
+
+    with pytest.raises(EnvironmentError_, match="integer Box"):
+        ObsEncoder(gym.spaces.Box(low=0.0, high=1.0, shape=(2,)), "onehot")

@@ -110,8 +110,11 @@ class MoPE:
         self.rng = np.random.default_rng(cfg.seed)
         torch.manual_seed(cfg.seed)
 
-        self.q_net = QNetwork(spec.obs_space, self.n_actions, self.m, cfg.hidden_sizes).to(self.device)
-        self.target_net = QNetwork(spec.obs_space, self.n_actions, self.m, cfg.hidden_sizes).to(self.device)
+        def q_network() -> QNetwork:
+            return QNetwork(spec.obs_space, self.n_actions, self.m, cfg.hidden_sizes, cfg.obs_encoding).to(self.device)
+
+        self.q_net = q_network()
+        self.target_net = q_network()
         self.target_net.load_state_dict(self.q_net.state_dict())
         self.target_net.requires_grad_(False)
         self.optimizer = torch.optim.Adam(self.q_net.parameters(), lr=cfg.learning_rate)
@@ -122,7 +125,7 @@ class MoPE:
         self.disc_optimizer: torch.optim.Optimizer | None = None
         if cfg.experience_exploration:
             self.discriminator = Discriminator(spec.obs_space, self.pref_sampler.partition.n_cells,
-                                               cfg.disc_hidden).to(self.device)
+                                               cfg.disc_hidden, cfg.obs_encoding).to(self.device)
             self.disc_optimizer = torch.optim.Adam(self.discriminator.parameters(), lr=cfg.disc_learning_rate)
 
         self.q_low, self.q_high = return_bounds(self.env, cfg.gamma)

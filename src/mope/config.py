@@ -51,6 +51,10 @@ class Config:
     #: Episode time limit; ``None`` uses the limit the environment registers (100 on Deep-Sea-Treasure).
     max_episode_steps: int | None = None
 
+    #: How observations enter the networks: "scale" (a bounded Box to [0, 1]: the paper's (x, y) input) or
+    #: "onehot" (each coordinate of an integer Box one-hot encoded).
+    obs_encoding: str = "scale"
+
     # --- EQL core (paper eq. 4; Yang et al. 2019) ------------------------------------------------------------
     gamma: float = 0.99
     hidden_sizes: tuple[int, ...] = (64, 128, 128, 64)
@@ -186,6 +190,7 @@ class Config:
         need(isinstance(self.seed, int) and self.seed >= 0, "seed", "must be an integer >= 0")
         need(isinstance(self.total_steps, int) and self.total_steps >= 1, "total_steps", "must be >= 1")
         need(self.device in DEVICES, "device", f"choose one of {', '.join(DEVICES)}")
+        need(self.obs_encoding in ("scale", "onehot"), "obs_encoding", "choose one of scale, onehot")
         need(isinstance(self.torch_threads, int) and self.torch_threads >= 0, "torch_threads", "must be >= 0")
         need(self.max_episode_steps is None or self.max_episode_steps >= 1, "max_episode_steps",
              "must be >= 1 or None")

@@ -20,13 +20,34 @@ from torch import nn
 
 from mope.errors import EnvironmentError_
 
+ENCODINGS = ("scale", "onehot")
+
 
 class ObsEncoder(nn.Module):
-    """Flat float features of an observation from a ``Box`` or ``Discrete`` space."""
+    """Flat float features of an observation from a ``Box`` or ``Discrete`` space.
 
-    def __init__(self, space: gym.Space) -> None:
+    ``encoding="scale"`` (default) scales a bounded ``Box`` to [0, 1]; ``"onehot"`` one-hot encodes each
+    coordinate of an integer ``Box`` with finite bounds (e.g. DST's (row, col) becomes 12 + 12 indicators).
+    A ``Discrete`` space is always one-hot encoded.
+    """
+
+    def __init__(self, space: gym.Space, encoding: str = "scale") -> None:
         super().__init__()
-        if isinstance(space, gym.spaces.Discrete):
+        if encoding not in ENCODINGS:
+            raise EnvironmentError_(f"obs_encoding '{encoding}' is unknown; choose one of {', '.join(ENCODINGS)}")
+        if (encoding == "onehot" and isinstance(space, gym.spaces.Box)
+                and not np.issubdtype(space.dtype, np.integer)):
+            raise EnvironmentError_(f"obs_encoding 'onehot' needs an integer Box observation, got {space}")
+        if encoding == "onehot" and isinstance(space, gym.spaces.Box):
+            self.kind = "box_onehot"
+            low = np.asarray(space.low, dtype=np.int64).reshape(-1)
+            high = np.asarray(space.high, dtype=np.int64).reshape(-1)
+            sizes = high - low + 1
+            self.sizes = [int(x) for x in sizes]
+            self.out_dim = int(sizes.sum())
+            self.register_buffer("low", torch.as_tensor(low, dtype=torch.int64))
+            self.register_buffer("scale", torch.as_tensor(sizes, dtype=torch.int64))
+        elif isinstance(space, gym.spaces.Discrete):
             self.kind = "discrete"
             self.n = int(space.n)
             self.start = int(space.start)
@@ -53,6 +74,10 @@ class ObsEncoder(nn.Module):
         """Encode a batch of raw observations ``(B, ...)`` into ``(B, out_dim)`` floats."""
         if self.kind == "discrete":
             return nn.functional.one_hot(obs.long().reshape(-1) - self.start, self.n).float()
+        if self.kind == "box_onehot":
+            idx = (obs.reshape(obs.shape[0], -1).long() - self.low).clamp_min(0)
+            idx = torch.minimum(idx, self.scale - 1)
+            return torch.cat([nn.functional.one_hot(idx[:, i], n) for i, n in enumerate(self.sizes)], dim=1).float()
         return (obs.reshape(obs.shape[0], -1).float() - self.low) / self.scale
 
 
@@ -78,9 +103,9 @@ class QNetwork(nn.Module):
     """
 
     def __init__(self, obs_space: gym.Space, n_actions: int, n_objectives: int,
-                 hidden: Sequence[int] = (64, 128, 128, 64)) -> None:
+                 hidden: Sequence[int] = (64, 128, 128, 64), obs_encoding: str = "scale") -> None:
         super().__init__()
-        self.encoder = ObsEncoder(obs_space)
+        self.encoder = ObsEncoder(obs_space, obs_encoding)
         self.n_actions = n_actions
         self.n_objectives = n_objectives
         self.net = mlp(self.encoder.out_dim + n_objectives, hidden, n_actions * n_objectives)
@@ -109,9 +134,10 @@ class Discriminator(nn.Module):
     Three fully connected layers: ``obs -> hidden[0] -> hidden[1] -> N_I``.
     """
 
-    def __init__(self, obs_space: gym.Space, n_cells: int, hidden: Sequence[int] = (64, 64)) -> None:
+    def __init__(self, obs_space: gym.Space, n_cells: int, hidden: Sequence[int] = (64, 64),
+                 obs_encoding: str = "scale") -> None:
         super().__init__()
-        self.encoder = ObsEncoder(obs_space)
+        self.encoder = ObsEncoder(obs_space, obs_encoding)
         self.n_cells = n_cells
         self.net = mlp(self.encoder.out_dim, hidden, n_cells)
 

@@ -109,3 +109,26 @@ def test_broken_checkpoint_is_named(tmp_path):
     res = mope_cli("eval", str(bad))
     assert res.returncode == 2
     assert "broken.pt" in res.stderr and "Traceback" not in res.stderr
+
+
+def test_ctrl_c_saves_a_loadable_checkpoint(tmp_path):
+    import signal
+    import time
+
+    from mope import MoPE
+
+    out = tmp_path / "interrupted-run"
+    proc = subprocess.Popen([sys.executable, "-m", "mope.cli", "train", "--steps", "100000", "--eval-every", "100",
+                             "--eval-prefs", "50", "--n-omega", "4", "--hidden", "16,16", "--out", str(out),
+                             "--no-progress"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 300
+    while time.time() < deadline and not (out / "metrics.csv").exists():
+        time.sleep(0.5)
+    while time.time() < deadline and len((out / "metrics.csv").read_text().splitlines()) < 2:
+        time.sleep(0.5)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "interrupted" in err and "Traceback" not in err
+    agent = MoPE.load(out / "checkpoints" / "interrupted.pt")
+    assert agent.global_step >= 100 and len(agent.buffer) == agent.global_step

@@ -36,16 +36,21 @@ def cpu_model() -> str:
     return platform.processor() or platform.machine()
 
 
+def median_seconds(fn, repeats: int) -> float:
+    """Median wall seconds of ``repeats`` calls of ``fn``."""
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
 def time_training(algo: str, steps: int, repeats: int, **overrides) -> float:
     """Median seconds per ``steps`` training steps (after a warm-up that fills the buffer)."""
     agent = mope.make_agent(algo, "deep-sea-treasure-v0", seed=0, **overrides)
     agent.train(agent.config.learning_starts + 100)
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        agent.train(steps)
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+    return median_seconds(lambda: agent.train(steps), repeats)
 
 
 def time_evaluation(repeats: int) -> float:
@@ -54,12 +59,7 @@ def time_evaluation(repeats: int) -> float:
     agent.train(500)
     evaluator = Evaluator(make_env("deep-sea-treasure-v0"), "deep-sea-treasure-v0", n_prefs=2000)
     evaluator.evaluate(agent)  # warm-up
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        evaluator.evaluate(agent)
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+    return median_seconds(lambda: evaluator.evaluate(agent), repeats)
 
 
 def main() -> None:

@@ -3,23 +3,11 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 
 import pytest
 import torch
 
 from mope.losses import envelope_target, eql_loss, mutual_information_bonus, preference_interval_td, priority
-
-
-@pytest.fixture(autouse=True)
-def one_torch_thread() -> Iterator[None]:
-    # These networks are tiny; with a second intra-op thread on a busy 2-core machine torch spends its time
-    # spinning (300 Adam steps: 0.3 s with one thread, 30+ s with two).
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
 
 # Envelope preferences (K = 2) and the designed Q_target(s'_b, a, w') for A = 3 actions, m = 2 objectives.
 ENV_PREFS = [[1.0, 0.0], [0.0, 1.0]]

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 
 import gymnasium as gym
 import numpy as np
@@ -13,17 +12,6 @@ from torch import nn
 
 from mope.errors import EnvironmentError_
 from mope.networks import Discriminator, ObsEncoder, QNetwork, mlp
-
-
-@pytest.fixture(autouse=True)
-def one_torch_thread() -> Iterator[None]:
-    # These networks are tiny; with a second intra-op thread on a busy 2-core machine torch spends its time
-    # spinning (300 Adam steps: 0.3 s with one thread, 30+ s with two).
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
 
 DST_SPACE = gym.spaces.Box(low=0, high=11, shape=(2,), dtype=np.int32)
 

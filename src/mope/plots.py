@@ -38,6 +38,8 @@ def plot_curves(curves: Mapping[str, tuple[np.ndarray, np.ndarray]], path: str |
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     for name, (steps, values) in curves.items():
         mean, lo, hi = mean_ci(values)
+        if np.all((values >= 0) & (values <= 1)):  # shares and ratios: keep the band inside [0, 1]
+            lo, hi = np.clip(lo, 0, 1), np.clip(hi, 0, 1)
         c = COLORS.get(name)
         ax.plot(steps, mean, label=f"{name} (n={len(values)})", color=c, lw=2)
         ax.fill_between(steps, lo, hi, color=c, alpha=0.2)

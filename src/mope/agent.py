@@ -136,6 +136,8 @@ class MoPE:
         self.global_step = 0
         self.episodes = 0
         self.last_losses: dict[str, float] = {}
+        #: Solutions of the latest evaluation in :meth:`train` (uniform preference set), or None.
+        self.last_solutions = None
 
     # ---------------------------------------------------------------------------------------------------------
     # acting
@@ -318,7 +320,7 @@ class MoPE:
 
         def evaluate() -> None:
             assert evaluator is not None
-            res, _ = evaluator.evaluate(self)
+            res, self.last_solutions = evaluator.evaluate(self)
             rec = {"step": self.global_step, "wall_s": time.perf_counter() - t0, **res}
             records.append(rec)
             bar.set_postfix(cr=f"{res['cr']:.3f}", eum=f"{res['eum']:.2f}", refresh=False)

@@ -138,10 +138,7 @@ def train_run(config: Config, out_dir: str | Path, progress: bool = True, overwr
     wall = time.perf_counter() - t0
     agent.save(out / "checkpoints" / "final.pt")
     final = records[-1] if records else {}
-    evaluator = Evaluator(eval_env, config.env_id, config.gamma, config.eval_prefs, config.seed,
-                          config.max_episode_steps, config.ref_point)
-    _, sols = evaluator.evaluate(agent)
-    write_solutions(out / "solutions.csv", sols)
+    write_solutions(out / "solutions.csv", agent.last_solutions)  # the final evaluation's solutions
     summary = {"final": final, "wall_s": wall, "s_per_1k_steps": 1000 * wall / config.total_steps,
                "algo": config.algo, "env_id": config.env_id, "seed": config.seed, "versions": _environment_info()}
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")

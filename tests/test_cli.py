@@ -111,7 +111,8 @@ def test_broken_checkpoint_is_named(tmp_path):
     assert "broken.pt" in res.stderr and "Traceback" not in res.stderr
 
 
-def test_ctrl_c_saves_a_loadable_checkpoint(tmp_path):
+@pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM"])
+def test_ctrl_c_saves_a_loadable_checkpoint(tmp_path, signame):
     import signal
     import time
 
@@ -126,7 +127,7 @@ def test_ctrl_c_saves_a_loadable_checkpoint(tmp_path):
         time.sleep(0.5)
     while time.time() < deadline and len((out / "metrics.csv").read_text().splitlines()) < 2:
         time.sleep(0.5)
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(getattr(signal, signame))
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err
     assert "interrupted" in err and "Traceback" not in err

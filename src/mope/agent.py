@@ -291,7 +291,7 @@ class MoPE:
 
     def train(self, total_timesteps: int | None = None, eval_env: gym.Env | None = None,
               eval_every: int | None = None, callback: Callable[[MoPE, dict[str, float]], None] | None = None,
-              progress: bool = False) -> list[dict[str, float]]:
+              progress: bool = False, stop: Callable[[], bool] | None = None) -> list[dict[str, float]]:
         """Train for ``total_timesteps`` environment steps (default ``config.total_steps``).
 
         Args:
@@ -300,6 +300,8 @@ class MoPE:
             eval_every: Default ``config.eval_every``.
             callback: Called with ``(agent, record)`` after each evaluation.
             progress: Show a progress bar with the latest CR.
+            stop: Polled once per step; when it returns True, training stops at that step boundary (no final
+                evaluation). ``train_run`` uses it to turn SIGINT/SIGTERM into a clean stop.
 
         Returns:
             The evaluation records (step, wall seconds and every metric of :class:`~mope.evaluation.Evaluator`).
@@ -333,6 +335,8 @@ class MoPE:
         with tqdm(total=total, disable=not progress, desc=f"{c.algo} {c.env_id}", unit="step",
                   dynamic_ncols=True, mininterval=0.5) as bar:
             while self.global_step < end:
+                if stop is not None and stop():
+                    return records
                 # 1. act epsilon-greedily under the episode's preference and store the transition
                 if self.rng.random() < self.epsilon:
                     action = int(self.rng.integers(self.n_actions))

@@ -17,6 +17,8 @@ import csv
 import json
 import os
 import platform
+import signal
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -99,8 +101,9 @@ def _environment_info() -> dict[str, Any]:
 def train_run(config: Config, out_dir: str | Path, progress: bool = True, overwrite: bool = False) -> RunResult:
     """Train one agent and write a complete run folder (see the module docstring).
 
-    Ctrl-C (KeyboardInterrupt) saves ``checkpoints/interrupted.pt`` before re-raising, so no finished
-    evaluation or trained weights are lost.
+    Ctrl-C (SIGINT) or SIGTERM stops training at the next step boundary, saves ``checkpoints/interrupted.pt``
+    (with the replay buffer) and raises ``KeyboardInterrupt``, so no finished evaluation or trained weights
+    are lost.
     """
     from torch.utils.tensorboard import SummaryWriter
 
@@ -126,15 +129,25 @@ def train_run(config: Config, out_dir: str | Path, progress: bool = True, overwr
             ag.save(out / "checkpoints" / f"step_{ag.global_step}.pt")
             last_ckpt[0] = ag.global_step
 
+    # SIGINT/SIGTERM set a flag that the training loop polls at each step boundary, so the interruption never
+    # lands inside torch, the CSV writer or TensorBoard's writer thread.
+    received: list[int] = []
+    handlers = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            handlers[sig] = signal.signal(sig, lambda signum, frame: received.append(signum))
     t0 = time.perf_counter()
     try:
-        records = agent.train(config.total_steps, eval_env=eval_env, callback=on_eval, progress=progress)
-    except KeyboardInterrupt:
-        agent.save(out / "checkpoints" / "interrupted.pt", include_buffer=True)
-        raise
+        records = agent.train(config.total_steps, eval_env=eval_env, callback=on_eval, progress=progress,
+                              stop=lambda: bool(received))
     finally:
+        for sig, old_handler in handlers.items():
+            signal.signal(sig, old_handler)
         metrics_file.close()
         writer.close()
+    if received:
+        agent.save(out / "checkpoints" / "interrupted.pt", include_buffer=True)
+        raise KeyboardInterrupt(f"stopped by signal {received[0]} at step {agent.global_step}")
     wall = time.perf_counter() - t0
     agent.save(out / "checkpoints" / "final.pt")
     final = records[-1] if records else {}

@@ -133,3 +133,11 @@ def test_ctrl_c_saves_a_loadable_checkpoint(tmp_path, signame):
     assert "interrupted" in err and "Traceback" not in err
     agent = MoPE.load(out / "checkpoints" / "interrupted.pt")
     assert agent.global_step >= 100 and len(agent.buffer) == agent.global_step
+
+
+def test_envs_lists_discrete_action_environments_only():
+    res = mope_cli("envs")
+    assert res.returncode == 0, res.stderr
+    listed = res.stdout.split()
+    assert "deep-sea-treasure-v0" in listed and "four-room-v0" in listed
+    assert "mo-mountaincarcontinuous-v0" not in listed

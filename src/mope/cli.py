@@ -182,6 +182,8 @@ def reproduce_dst_cmd(
 @app.command()
 def envs() -> None:
     """List MO-Gymnasium environments mope's agents can use directly (discrete actions)."""
+    import warnings
+
     import gymnasium as gym
 
     from mope.envs import make_env
@@ -191,7 +193,9 @@ def envs() -> None:
         if "mo_gymnasium" not in str(spec.entry_point) and "mope" not in str(spec.entry_point):
             continue
         try:
-            make_env(env_id).close()
+            with warnings.catch_warnings():  # deprecation notices of envs we only probe
+                warnings.simplefilter("ignore")
+                make_env(env_id).close()
         except Exception:  # noqa: BLE001 - skip what does not fit or needs extra packages
             continue
         typer.echo(env_id)

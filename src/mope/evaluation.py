@@ -139,9 +139,10 @@ class Evaluator:
         n = len(self.prefs)
         uni = sols.subset(slice(0, n))
         result = metrics.evaluate_front(uni.discounted, uni.prefs, true_front=self.front, ref_point=self.ref_point)
-        eq = metrics.evaluate_front(sols.discounted[n:], sols.prefs[n:], true_front=self.front)
-        result["eum"] = eq["eum"]
-        result["eum_optimal"] = eq["eum_optimal"]
-        result["eum_gap"] = eq["eum_gap"]
+        eq_prefs, eq_returns = sols.prefs[n:], sols.discounted[n:]
+        result["eum"] = metrics.expected_utility(eq_returns, eq_prefs)
+        if self.front is not None:
+            result["eum_optimal"] = float(np.mean(metrics.optimal_utility(eq_prefs, self.front)))
+            result["eum_gap"] = result["eum_optimal"] - result["eum"]
         result["timeout_share"] = float(np.mean(~uni.terminated))
         return result, uni

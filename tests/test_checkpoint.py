@@ -99,7 +99,7 @@ def test_crash_during_write_keeps_previous_file(tmp_path: Path, monkeypatch: pyt
         raise OSError("disk full")
 
     monkeypatch.setattr(checkpoint.torch, "save", broken_save)
-    with pytest.raises(OSError, match="disk full"):
+    with pytest.raises(CheckpointError, match="cannot write checkpoint .*ckpt.pt.*disk full"):
         save_checkpoint(path, {"config": {}, "step": 999})
     monkeypatch.undo()
 

@@ -38,9 +38,13 @@ def save_checkpoint(path: str | Path, payload: dict[str, Any]) -> Path:
     A crash during the write leaves any previous file at ``path`` intact.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     data = {"format_version": FORMAT_VERSION, "mope_version": mope_version(), **payload}
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:
+        raise CheckpointError(f"cannot write checkpoint '{path}': folder '{path.parent}' is not writable "
+                              f"({exc.strerror or exc})") from None
     umask = os.umask(0)
     os.umask(umask)
     os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file the permissions of an ordinary write
@@ -50,8 +54,11 @@ def save_checkpoint(path: str | Path, payload: dict[str, Any]) -> Path:
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         Path(tmp).unlink(missing_ok=True)
+        if isinstance(exc, OSError):
+            raise CheckpointError(f"cannot write checkpoint '{path}': {exc.strerror or exc}; any previous file "
+                                  "there is unchanged") from None
         raise
     return path
 
@@ -68,6 +75,7 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
         raise CheckpointError(f"'{path}' is a folder; give a checkpoint file or a run folder")
     if not path.is_file():
         raise CheckpointError(f"checkpoint '{path}' does not exist")
+    _check_archive(path)
     try:
         data = torch.load(path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as exc:
@@ -78,9 +86,9 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
                 "code when loaded; only load checkpoints written by mope"
             ) from None
         raise CheckpointError(f"checkpoint '{path}' is corrupt: {msg}") from None
-    except (RuntimeError, EOFError, zipfile.BadZipFile, OSError, ValueError) as exc:
+    except Exception as exc:  # noqa: BLE001 - a damaged file can fail anywhere inside torch's reader
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise CheckpointError(f"checkpoint '{path}' is truncated or corrupt ({first})") from None
+        raise CheckpointError(f"checkpoint '{path}' is truncated or corrupt ({first[:200]})") from None
     if not isinstance(data, dict) or "format_version" not in data or "config" not in data:
         raise CheckpointError(f"'{path}' is not a mope checkpoint (no format_version/config)")
     if data["format_version"] != FORMAT_VERSION:
@@ -88,3 +96,60 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
             f"checkpoint '{path}' has format version {data['format_version']}; this mope reads version {FORMAT_VERSION}"
         )
     return data
+
+
+def _check_archive(path: Path) -> None:
+    """Verify the CRC-32 of every member of a zip checkpoint (torch's reader does not), before unpickling.
+
+    Files that are not zip archives (torch's legacy format) are left to ``torch.load``.
+    """
+    try:
+        if not zipfile.is_zipfile(path):
+            return
+        with zipfile.ZipFile(path) as archive:
+            bad = archive.testzip()
+    except Exception as exc:  # noqa: BLE001 - BadZipFile, OSError, UnicodeDecodeError, NotImplementedError, ...
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise CheckpointError(f"checkpoint '{path}' is truncated or corrupt ({first[:200]})") from None
+    if bad is not None:
+        raise CheckpointError(f"checkpoint '{path}' is corrupt (checksum mismatch in '{bad}')")
+
+
+def check_compatible(data: dict[str, Any], path: str | Path, env_id: str | None, n_objectives: int,
+                     n_actions: int, obs_shape: tuple[int, ...] | None = None, same_env: bool = True) -> None:
+    """Raise :class:`CheckpointError` if a loaded checkpoint does not fit the environment it is loaded into.
+
+    Args:
+        data: What :func:`load_checkpoint` returned.
+        path: The checkpoint's path, for the message.
+        env_id: Id of the environment it is loaded into (``None``: not known, not compared).
+        n_objectives: Its number of objectives.
+        n_actions: Its number of actions.
+        obs_shape: Its observation shape (``None``: not compared).
+        same_env: Also refuse another environment id with the same shapes.
+    """
+    config = data.get("config") or {}
+    saved = data.get("env") or {}
+    saved_id = config.get("env_id")
+    saved_m, saved_a, saved_shape = saved.get("n_objectives"), saved.get("n_actions"), saved.get("obs_shape")
+    kinds = []
+    if saved_m is not None and int(saved_m) != n_objectives:
+        kinds.append("another number of objectives")
+    if saved_a is not None and int(saved_a) != n_actions:
+        kinds.append("another number of actions")
+    if saved_shape is not None and obs_shape is not None and tuple(saved_shape) != tuple(obs_shape):
+        kinds.append("another observation shape")
+    if same_env and saved_id is not None and env_id is not None and saved_id != env_id:
+        kinds.insert(0, "another environment")
+    if not kinds:
+        return
+
+    def describe(m: Any, a: Any, shape: Any) -> str:
+        m, a, shape = ("?" if m is None else m), ("?" if a is None else a), ("?" if shape is None else tuple(shape))
+        return f"{m} objectives, {a} actions, observations {shape}"
+
+    raise CheckpointError(
+        f"checkpoint '{path}' does not fit ({', '.join(kinds)}): it was trained on '{saved_id}' "
+        f"({describe(saved_m, saved_a, saved_shape)}) but the environment given is '{env_id or '?'}' "
+        f"({describe(n_objectives, n_actions, obs_shape)}); load it with '{saved_id}'"
+    )

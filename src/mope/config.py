@@ -12,6 +12,7 @@ Deep-Sea-Treasure, and the field's docstring says so (see ``docs/design.md``).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 from collections.abc import Callable
@@ -255,7 +256,7 @@ class Config:
         names = cls.field_names()
         for key in data:
             if key not in names:
-                raise ConfigError(f"unknown config key '{key}'{suggest(key, names)}")
+                raise unknown_key_error(key)
         if algo is not None:
             return cls.for_algo(algo, **data)
         types = {f.name: f.type for f in dataclasses.fields(cls)}
@@ -266,8 +267,15 @@ class Config:
         return cls(**data)
 
     def save(self, path: str | Path) -> None:
-        """Write the resolved config as JSON."""
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+        """Write the resolved config as JSON.
+
+        Raises:
+            ConfigError: if the file cannot be written (missing permission, a file where a folder should be).
+        """
+        try:
+            Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+        except OSError as exc:
+            raise ConfigError(f"config file '{path}' could not be written: {exc.strerror or exc}") from None
 
     @classmethod
     def load(cls, path: str | Path) -> Config:
@@ -275,7 +283,11 @@ class Config:
         path = Path(path)
         if not path.is_file():
             raise ConfigError(f"config file '{path}' does not exist")
-        text = path.read_text()
+        try:
+            text = path.read_text()
+        except (OSError, UnicodeDecodeError) as exc:
+            reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+            raise ConfigError(f"config file '{path}' could not be read: {reason}") from None
         try:
             if path.suffix in (".yaml", ".yml"):
                 import yaml
@@ -284,7 +296,39 @@ class Config:
             else:
                 data = json.loads(text)
         except Exception as exc:  # noqa: BLE001 - any parse failure is the user's file
-            raise ConfigError(f"config file '{path}' could not be parsed: {exc}") from None
+            raise ConfigError(f"config file '{path}' could not be parsed: {_parse_problem(exc)}") from None
         if not isinstance(data, dict):
             raise ConfigError(f"config file '{path}' must hold a mapping of settings")
         return cls.from_dict(data)
+
+
+def unknown_key_error(key: str) -> ConfigError:
+    """The error for a key that is not a :class:`Config` field, with the closest field name when one is close."""
+    names = Config.field_names()
+    hint = suggest(key, names) or "; valid keys are the fields of mope.Config, e.g. gamma, n_omega, sigma_omega"
+    return ConfigError(f"unknown config key '{key}'{hint}")
+
+
+def _parse_problem(exc: Exception) -> str:
+    """A short description of a JSON or YAML parse error with its line and column."""
+    problem = getattr(exc, "problem", None)  # yaml.MarkedYAMLError
+    mark = getattr(exc, "problem_mark", None)
+    if problem and mark is not None:
+        return f"{problem} at line {mark.line + 1}, column {mark.column + 1}"
+    return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+
+
+_dataclass_init = Config.__init__
+
+
+@functools.wraps(_dataclass_init)
+def _checked_init(self: Config, *args: Any, **kwargs: Any) -> None:
+    # Config(sigma_omgea=0.1) would otherwise fail with a TypeError from the generated __init__.
+    for key in kwargs:
+        if key not in _FIELD_NAMES:
+            raise unknown_key_error(key)
+    _dataclass_init(self, *args, **kwargs)
+
+
+_FIELD_NAMES = frozenset(Config.field_names())
+Config.__init__ = _checked_init  # type: ignore[method-assign]

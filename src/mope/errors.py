@@ -11,8 +11,22 @@ import difflib
 from collections.abc import Iterable
 
 
+def one_line(text: str) -> str:
+    """Collapse ``text`` to one line: runs of whitespace (newlines included) become one space."""
+    return " ".join(str(text).split())
+
+
 class MopeError(ValueError):
-    """Base class of every user-facing error in mope."""
+    """Base class of every user-facing error in mope.
+
+    The message is always one line: text from elsewhere (a YAML parser, torch, the OS) that spans several lines
+    is collapsed, so the CLI can print it as a single ``error: ...`` line.
+    """
+
+    def __init__(self, *args: object) -> None:
+        if len(args) == 1 and isinstance(args[0], str):
+            args = (one_line(args[0]),)
+        super().__init__(*args)
 
 
 class ConfigError(MopeError):

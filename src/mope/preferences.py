@@ -73,11 +73,17 @@ def equally_spaced(m: int, n: int) -> np.ndarray:
     return np.asarray(get_reference_directions("das-dennis", m, n_partitions=h), dtype=np.float64)
 
 
-def parse_preference(text: str) -> list[float]:
-    """Parse ``"0.3,0.7"`` (commas or spaces) into floats; raise a clear error on junk."""
+def parse_preference(text: str, m: int | None = None) -> list[float]:
+    """Parse ``"0.3,0.7"`` (commas or spaces) into floats; raise a clear error on junk.
+
+    Args:
+        text: The preference as typed.
+        m: Number of objectives, used only in the error message.
+    """
     parts = [p for p in text.replace(",", " ").split() if p]
     if not parts:
-        raise PreferenceError(f"preference '{text}' is empty; give m comma-separated weights, e.g. 0.3,0.7")
+        count = f"{m} " if m is not None else ""
+        raise PreferenceError(f"preference '{text}' is empty; give {count}comma-separated weights, e.g. 0.3,0.7")
     try:
         return [float(p) for p in parts]
     except ValueError:
@@ -93,16 +99,28 @@ def validate_preference(pref: Sequence[float] | np.ndarray, m: int) -> np.ndarra
     Raises:
         PreferenceError: naming the bad value.
     """
-    arr = np.asarray(pref, dtype=np.float64) if not isinstance(pref, str) else np.asarray(parse_preference(pref))
+    if isinstance(pref, str):
+        arr = np.asarray(parse_preference(pref, m))
+    else:
+        try:
+            arr = np.asarray(pref, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise PreferenceError(
+                f"preference {pref!r} is not a list of numbers; give {m} weights that sum to 1") from None
     if arr.size == 0:
         raise PreferenceError(f"preference is empty; expected {m} weights that sum to 1")
-    if arr.ndim not in (1, 2) or arr.shape[-1] != m:
+    if arr.ndim == 0:
+        raise PreferenceError(f"preference {pref!r} is not a list of weights; give {m} weights that sum to 1")
+    if arr.ndim > 2:
+        raise PreferenceError(f"preference has shape {arr.shape}; expected ({m},) or (n, {m})")
+    if arr.shape[-1] != m:
         raise PreferenceError(
             f"preference {np.array2string(arr, precision=4)} has length {arr.shape[-1]}; this environment has "
             f"{m} objectives, so give {m} weights that sum to 1"
         )
     if not np.all(np.isfinite(arr)):
-        raise PreferenceError(f"preference {np.array2string(arr, precision=4)} contains NaN or inf")
+        raise PreferenceError(
+            f"preference {np.array2string(arr, precision=4)} contains NaN or inf; weights must be finite numbers")
     if np.any(arr < 0):
         raise PreferenceError(
             f"preference {np.array2string(arr, precision=4)} has a negative weight; weights must be >= 0")

@@ -44,8 +44,11 @@ class SumTree:
         pr = np.asarray(priorities, dtype=np.float64).reshape(-1)
         if idx.size == 0:
             return
-        if np.any(pr < 0) or not np.all(np.isfinite(pr)):
-            raise ValueError("priorities must be finite and >= 0")
+        bad = ~np.isfinite(pr) | (pr < 0)
+        if np.any(bad):
+            i = int(np.argmax(bad))
+            raise ValueError(f"priority {pr[i]} at index {int(idx[i])} is out of range: priorities must be finite "
+                             "and >= 0")
         nodes = self.size + idx
         self.tree[nodes] = pr
         for _ in range(self.depth):

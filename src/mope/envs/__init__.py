@@ -48,7 +48,8 @@ def make_env(env_id: str, max_episode_steps: int | None = None, **kwargs) -> gym
         EnvironmentError_: for an unknown id or an unsupported environment, naming it.
     """
     if env_id not in gym.registry:
-        raise EnvironmentError_(f"unknown environment '{env_id}'{suggest(env_id, registered_ids())}")
+        hint = suggest(env_id, registered_ids()) or "; `mope envs` lists the environments mope can use"
+        raise EnvironmentError_(f"unknown environment '{env_id}'{hint}")
     try:
         env = mo_gym.make(env_id, max_episode_steps=max_episode_steps, **kwargs) if max_episode_steps \
             else mo_gym.make(env_id, **kwargs)
@@ -58,6 +59,37 @@ def make_env(env_id: str, max_episode_steps: int | None = None, **kwargs) -> gym
         raise EnvironmentError_(f"environment '{env_id}' could not be created: {exc}") from None
     check_env_fits(env, env_id)
     return env
+
+
+class DiscreteActions(gym.ActionWrapper):
+    """Give a continuous-action (``Box``) environment a ``Discrete`` action space, so EQL/MoPE can use it.
+
+    Each dimension of the box is cut into ``bins`` evenly spaced values from ``low`` to ``high``; discrete action
+    ``k`` is the ``k``-th point of the resulting grid (``bins ** d`` actions for a ``d``-dimensional box).
+
+    Args:
+        env: An environment whose action space is a bounded ``Box``.
+        bins: Values per action dimension, at least 2.
+    """
+
+    def __init__(self, env: gym.Env, bins: int = 5) -> None:
+        super().__init__(env)
+        space = env.action_space
+        if not isinstance(space, gym.spaces.Box):
+            raise EnvironmentError_(f"DiscreteActions needs a Box action space, got {space}")
+        if isinstance(bins, bool) or not isinstance(bins, int) or bins < 2:
+            raise EnvironmentError_(f"bins={bins!r} is out of range: must be an integer >= 2")
+        low, high = space.low.reshape(-1), space.high.reshape(-1)
+        if not (np.all(np.isfinite(low)) and np.all(np.isfinite(high))):
+            raise EnvironmentError_(f"DiscreteActions needs a bounded Box action space, got {space}")
+        axes = [np.linspace(lo, hi, bins) for lo, hi in zip(low, high, strict=True)]
+        grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, low.size)
+        self._table = grid.astype(space.dtype).reshape(-1, *space.shape)
+        self.action_space = gym.spaces.Discrete(len(self._table))
+
+    def action(self, action: int) -> np.ndarray:
+        """The box action of discrete action ``action``."""
+        return self._table[int(action)]
 
 
 @dataclass(frozen=True)
@@ -74,10 +106,15 @@ class EnvSpec:
 def check_env_fits(env: gym.Env, env_id: str | None = None) -> EnvSpec:
     """Check the action, observation and reward spaces; return an :class:`EnvSpec`."""
     name = env_id or (env.spec.id if env.spec else type(env.unwrapped).__name__)
+    if isinstance(env.action_space, gym.spaces.Box):
+        raise EnvironmentError_(
+            f"environment '{name}' has a continuous action space {env.action_space}; EQL/MoPE need discrete actions: "
+            "wrap it with a discrete action wrapper, mope.envs.DiscreteActions(env, bins=5), and pass the wrapped "
+            "environment to the agent, or use an environment with a Discrete action space (`mope envs` lists them)"
+        )
     if not isinstance(env.action_space, gym.spaces.Discrete):
         raise EnvironmentError_(
-            f"environment '{name}' has a continuous action space {env.action_space}; EQL/MoPE need discrete actions "
-            "(discretise it with an action wrapper, or use an environment with a Discrete action space)"
+            f"environment '{name}' has action space {env.action_space}; EQL/MoPE need a Discrete action space"
         )
     if not isinstance(env.observation_space, (gym.spaces.Box, gym.spaces.Discrete)):
         raise EnvironmentError_(

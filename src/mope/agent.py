@@ -135,6 +135,13 @@ class MoPE:
         self.buffer = ReplayBuffer(cfg.buffer_size, self.obs_shape, self.m, cfg.per, obs_dtype)
         self.global_step = 0
         self.episodes = 0
+        #: Training wall seconds before the current ``train`` call (carried across resumes).
+        self.wall_s = 0.0
+        # The episode in progress (kept across ``train`` calls and in resumable checkpoints): its reset seed,
+        # preference, current observation and the actions taken so far (replayed on load to restore the env).
+        self._obs: Any = None
+        self._pref: np.ndarray | None = None
+        self._episode_actions: list[int] = []
         self.last_losses: dict[str, float] = {}
         #: Solutions of the latest evaluation in :meth:`train` (uniform preference set), or None.
         self.last_solutions = None
@@ -246,8 +253,7 @@ class MoPE:
         loss_rows, l_a, l_b = eql_loss(q, y, w, c.lb_weight)
         loss = (is_weights * loss_rows).mean()
         if not torch.isfinite(loss):
-            raise TrainingDivergedError(
-                f"training diverged at step {self.global_step}: the EQL loss is {loss.item()}")
+            self._raise_diverged(loss, q, y)
 
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
@@ -274,6 +280,16 @@ class MoPE:
         self.last_losses = stats
         return stats
 
+    def _raise_diverged(self, loss: torch.Tensor, q: torch.Tensor, y: torch.Tensor) -> None:
+        """Name the first non-finite quantity of a failed update (checked only once the loss is non-finite)."""
+        if not torch.isfinite(q).all():
+            what = f"a Q-value is {q[~torch.isfinite(q)][0].item()}"
+        elif not torch.isfinite(y).all():
+            what = f"an envelope target is {y[~torch.isfinite(y)][0].item()}"
+        else:
+            what = f"the EQL loss is {loss.item()}"
+        raise TrainingDivergedError(f"training diverged at step {self.global_step}: {what}")
+
     def _discriminator_step(self, obs: torch.Tensor, acting_prefs: np.ndarray) -> tuple[torch.Tensor, float]:
         """Mutual-information term (eq. 6) for the batch, then one cross-entropy step of q_phi on (s, cell(w_b))."""
         assert self.discriminator is not None and self.disc_optimizer is not None
@@ -291,7 +307,8 @@ class MoPE:
 
     def train(self, total_timesteps: int | None = None, eval_env: gym.Env | None = None,
               eval_every: int | None = None, callback: Callable[[MoPE, dict[str, float]], None] | None = None,
-              progress: bool = False, stop: Callable[[], bool] | None = None) -> list[dict[str, float]]:
+              progress: bool = False, stop: Callable[[], bool] | None = None,
+              on_step: Callable[[MoPE], None] | None = None) -> list[dict[str, float]]:
         """Train for ``total_timesteps`` environment steps (default ``config.total_steps``).
 
         Args:
@@ -302,6 +319,11 @@ class MoPE:
             progress: Show a progress bar with the latest CR.
             stop: Polled once per step; when it returns True, training stops at that step boundary (no final
                 evaluation). ``train_run`` uses it to turn SIGINT/SIGTERM into a clean stop.
+            on_step: Called with the agent at the end of every step (after any evaluation); ``train_run`` writes
+                its periodic checkpoints from it.
+
+        The episode in progress carries over from one call to the next, so ``train(500)`` twice equals
+        ``train(1000)`` (evaluations aside).
 
         Returns:
             The evaluation records (step, wall seconds and every metric of :class:`~mope.evaluation.Evaluator`).
@@ -323,33 +345,36 @@ class MoPE:
         def evaluate() -> None:
             assert evaluator is not None
             res, self.last_solutions = evaluator.evaluate(self)
-            rec = {"step": self.global_step, "wall_s": time.perf_counter() - t0, **res}
+            rec = {"step": self.global_step, "wall_s": self.wall_s + time.perf_counter() - t0, **res}
             records.append(rec)
             bar.set_postfix(cr=f"{res['cr']:.3f}", eum=f"{res['eum']:.2f}", refresh=False)
             if callback is not None:
                 callback(self, rec)
 
-        obs, _ = self.env.reset(seed=c.seed + self.episodes)
-        pref = self.pref_sampler.sample(self.rng)
+        if self._obs is None:
+            self._start_episode()
         end = self.global_step + total
         with tqdm(total=total, disable=not progress, desc=f"{c.algo} {c.env_id}", unit="step",
                   dynamic_ncols=True, mininterval=0.5) as bar:
             while self.global_step < end:
                 if stop is not None and stop():
+                    self.wall_s += time.perf_counter() - t0
                     return records
                 # 1. act epsilon-greedily under the episode's preference and store the transition
+                obs, pref = self._obs, self._pref
+                assert pref is not None
                 if self.rng.random() < self.epsilon:
                     action = int(self.rng.integers(self.n_actions))
                 else:
                     action = int(self.greedy_actions(np.asarray(obs)[None], pref[None])[0])
                 next_obs, reward, terminated, truncated, _ = self.env.step(action)
                 self.buffer.add(obs, pref, action, np.asarray(reward, dtype=np.float32), next_obs, terminated)
-                obs = next_obs
+                self._obs = next_obs
+                self._episode_actions.append(action)
                 self.global_step += 1
                 if terminated or truncated:
                     self.episodes += 1
-                    obs, _ = self.env.reset(seed=c.seed + self.episodes)
-                    pref = self.pref_sampler.sample(self.rng)
+                    self._start_episode()
 
                 # 2-5. learn
                 if self.global_step > c.learning_starts and len(self.buffer) >= c.batch_size:
@@ -362,9 +387,26 @@ class MoPE:
                 bar.update(1)
                 if evaluator is not None and every and self.global_step % every == 0:
                     evaluate()
+                if on_step is not None:
+                    on_step(self)
             if evaluator is not None and (not records or records[-1]["step"] != self.global_step):
                 evaluate()
+        self.wall_s += time.perf_counter() - t0
         return records
+
+    def _start_episode(self) -> None:
+        """Reset the training env (seeded by the episode count) and draw the episode's preference."""
+        self._obs, _ = self.env.reset(seed=self.config.seed + self.episodes)
+        self._pref = self.pref_sampler.sample(self.rng)
+        self._episode_actions = []
+
+    def _restore_episode(self, pref: np.ndarray, actions: list[int]) -> None:
+        """Rebuild the episode in progress by replaying its actions from its seeded reset (no RNG draws)."""
+        self._obs, _ = self.env.reset(seed=self.config.seed + self.episodes)
+        for a in actions:
+            self._obs, *_ = self.env.step(int(a))
+        self._pref = np.asarray(pref, dtype=np.float64)
+        self._episode_actions = [int(a) for a in actions]
 
     # ---------------------------------------------------------------------------------------------------------
     # saving and loading
@@ -382,6 +424,7 @@ class MoPE:
             "episodes": self.episodes,
             "rng": self.rng.bit_generator.state,
             "torch_rng": torch.get_rng_state(),
+            "wall_s": self.wall_s,
         }
         if self.discriminator is not None and self.disc_optimizer is not None:
             state["discriminator"] = self.discriminator.state_dict()
@@ -389,6 +432,10 @@ class MoPE:
         if include_buffer:
             state["buffer"] = {k: torch.as_tensor(v) if isinstance(v, np.ndarray) else v
                                for k, v in self.buffer.state_dict().items()}
+            if self._pref is not None:
+                state["episode"] = {"pref": torch.as_tensor(self._pref),
+                                    "actions": torch.as_tensor(self._episode_actions, dtype=torch.int64)}
+            state["last_losses"] = dict(self.last_losses)
         return state
 
     def save(self, path: str | Path, include_buffer: bool = False) -> Path:
@@ -437,9 +484,13 @@ class MoPE:
         self.episodes = int(data["episodes"])
         self.rng.bit_generator.state = data["rng"]
         torch.set_rng_state(data["torch_rng"])
+        self.wall_s = float(data.get("wall_s", 0.0))
         if "buffer" in data:
             self.buffer.load_state_dict({k: v.numpy() if isinstance(v, torch.Tensor) else v
                                          for k, v in data["buffer"].items()})
+            self.last_losses = dict(data.get("last_losses", {}))
+        if "episode" in data:
+            self._restore_episode(data["episode"]["pref"].numpy(), data["episode"]["actions"].tolist())
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(env={self.config.env_id!r}, algo={self.algo!r}, step={self.global_step})"

@@ -61,12 +61,31 @@ def train(
     config: Annotated[Path | None, typer.Option(help="JSON/YAML config file; flags override it.")] = None,
     set_: Annotated[list[str] | None, typer.Option("--set", help="Any config field: --set batch_size=64.")] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing run in --out.")] = False,
+    resume: Annotated[Path | None, typer.Option(help="Continue the run in this folder from its last checkpoint.",
+                                                 metavar="RUN_DIR")] = None,
     progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
 ) -> None:
     """Train an agent, evaluating CR/HV/EUM as it goes; writes a run folder."""
-    from mope.experiments import train_run
+    from mope.experiments import RunFolderError, run_status, train_run
 
+    run_dir = resume
     try:
+        if resume is not None:
+            given = [name for name, v in (("--steps", steps), ("--seed", seed), ("--out", out), ("--config", config),
+                                          ("--set", set_), ("--eval-every", eval_every), ("--hidden", hidden))
+                     if v]
+            if given:
+                raise ConfigError(f"--resume continues a run with its saved config; drop {', '.join(given)}")
+            if not (resume / "config.json").is_file():
+                raise RunFolderError(f"--resume '{resume}' is not a mope run folder (no config.json)")
+            if run_status(resume) == "new":
+                raise RunFolderError(f"--resume '{resume}' has no checkpoints/resume.pt to continue from")
+            cfg = Config.load(resume / "config.json")
+            if device is not None:
+                cfg = cfg.replace(device=device)
+            result = train_run(cfg, resume, progress=progress, resume=True)
+            _print_final(cfg, result)
+            return
         base: dict[str, Any] = Config.load(config).to_dict() if config else {}
         base.pop("algo", None)
         if algo not in ALGOS:
@@ -90,8 +109,13 @@ def train(
         _fail(str(exc))
         return
     except KeyboardInterrupt:
-        typer.echo(f"\ninterrupted; weights saved in {run_dir}/checkpoints/interrupted.pt", err=True)
+        typer.echo(f"\ninterrupted; the training state is saved in {run_dir}/checkpoints/resume.pt\n"
+                   f"continue with: mope train --resume {run_dir}", err=True)
         raise typer.Exit(130) from None
+    _print_final(cfg, result)
+
+
+def _print_final(cfg: Config, result: Any) -> None:
     f = {k: result.final.get(k, float("nan")) for k in ("cr", "hv", "eum", "eum_optimal", "optimal_share",
                                                           "timeout_share")}
     typer.echo(

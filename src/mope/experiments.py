@@ -8,7 +8,12 @@ A run folder written by :func:`train_run` (and ``mope train``) holds::
     solutions.csv        the final evaluation: preference, discounted and undiscounted return per preference
     summary.json         final metrics, wall time, seconds per 1k steps, versions
     tb/                  TensorBoard scalars (metrics and losses)
-    checkpoints/         step_<N>.pt every checkpoint_every steps, and final.pt (``MoPE.load`` reads them)
+    checkpoints/         step_<N>.pt (weights) and resume.pt (the whole training state: buffer, priorities,
+                         counts, optimizers, RNGs, the episode in progress) every checkpoint_every steps;
+                         final.pt at the end (``MoPE.load`` reads them all)
+
+``train_run(..., resume=True)`` (``mope train --resume RUN_DIR``) continues from ``resume.pt``: metrics rows
+after its step are dropped and re-made, and the continued run equals an uninterrupted one step for step.
 """
 
 from __future__ import annotations
@@ -19,7 +24,6 @@ import os
 import platform
 import signal
 import threading
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,7 +31,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from mope.agent import MoPE
+from mope.agent import MoPE, TrainingDivergedError
 from mope.checkpoint import mope_version
 from mope.config import Config
 from mope.envs import make_env
@@ -54,13 +58,28 @@ class RunResult:
     wall_s: float
 
 
+RESUME_CHECKPOINT = "resume.pt"
+
+
+def run_status(out_dir: str | Path) -> str:
+    """``finished`` (summary.json written), ``resumable`` (checkpoints/resume.pt exists) or ``new``."""
+    out = Path(out_dir)
+    if (out / "summary.json").is_file():
+        return "finished"
+    if (out / "checkpoints" / RESUME_CHECKPOINT).is_file():
+        return "resumable"
+    return "new"
+
+
 def prepare_out_dir(out_dir: str | Path, overwrite: bool = False) -> Path:
     """Create the run folder; refuse to clobber finished results unless ``overwrite``."""
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise RunFolderError(f"output path '{out}' exists and is not a folder")
     if (out / "metrics.csv").exists() and not overwrite:
-        raise RunFolderError(f"output folder '{out}' already holds a run; choose another --out or pass --overwrite")
+        hint = " or --resume to continue it" if run_status(out) == "resumable" else ""
+        raise RunFolderError(
+            f"output folder '{out}' already holds a run; choose another --out, pass --overwrite{hint}")
     try:
         (out / "checkpoints").mkdir(parents=True, exist_ok=True)
         probe = out / ".write_test"
@@ -98,24 +117,66 @@ def _environment_info() -> dict[str, Any]:
             "python": platform.python_version(), "machine": platform.machine(), "cpus": os.cpu_count()}
 
 
-def train_run(config: Config, out_dir: str | Path, progress: bool = True, overwrite: bool = False) -> RunResult:
+def _same_run(saved: Config, wanted: Config) -> list[str]:
+    """Fields (other than device and thread count) in which two configs differ."""
+    a, b = saved.to_dict(), wanted.to_dict()
+    return [k for k in a if k not in ("device", "torch_threads") and a[k] != b.get(k)]
+
+
+def _finished_result(out: Path) -> RunResult:
+    summary = json.loads((out / "summary.json").read_text())
+    agent = MoPE.load(out / "checkpoints" / "final.pt")
+    return RunResult(out, agent, read_metrics(out), summary.get("final", {}), float(summary.get("wall_s", 0.0)))
+
+
+def train_run(config: Config, out_dir: str | Path, progress: bool = True, overwrite: bool = False,
+              resume: bool = False) -> RunResult:
     """Train one agent and write a complete run folder (see the module docstring).
 
-    Ctrl-C (SIGINT) or SIGTERM stops training at the next step boundary, saves ``checkpoints/interrupted.pt``
-    (with the replay buffer) and raises ``KeyboardInterrupt``, so no finished evaluation or trained weights
-    are lost.
+    Args:
+        config: The resolved config.
+        out_dir: The run folder.
+        progress: Show a progress bar.
+        overwrite: Replace a run already in ``out_dir``.
+        resume: Continue the run in ``out_dir`` from ``checkpoints/resume.pt``; return a finished run as it is;
+            start a new run if there is nothing to resume.
+
+    Ctrl-C (SIGINT) or SIGTERM stops training at the next step boundary, saves ``checkpoints/resume.pt``
+    (the whole training state) and raises ``KeyboardInterrupt``; no finished evaluation or trained weights are
+    lost. A NaN or inf raises :class:`~mope.agent.TrainingDivergedError` naming the step and the quantity and
+    leaves the last good checkpoints untouched.
     """
     from torch.utils.tensorboard import SummaryWriter
 
-    out = prepare_out_dir(out_dir, overwrite)
-    config.save(out / "config.json")
-    agent = MoPE(config.env_id, config)
+    out = Path(out_dir)
+    status = run_status(out) if resume else "new"
+    if status != "new":
+        saved = Config.load(out / "config.json")
+        differ = _same_run(saved, config)
+        if differ:
+            raise RunFolderError(
+                f"cannot resume '{out}': its config differs in {', '.join(differ)} "
+                f"(saved {', '.join(f'{k}={saved.to_dict()[k]!r}' for k in differ)})")
+    if status == "finished":
+        return _finished_result(out)
+    if status == "resumable":
+        agent = MoPE.load(out / "checkpoints" / RESUME_CHECKPOINT, device=config.device,
+                          torch_threads=config.torch_threads)
+        kept = [r for r in read_metrics(out) if r["step"] <= agent.global_step] if (out / "metrics.csv").is_file() \
+            else []
+    else:
+        out = prepare_out_dir(out_dir, overwrite)
+        config.save(out / "config.json")
+        agent = MoPE(config.env_id, config)
+        kept = []
     eval_env = make_env(config.env_id, config.max_episode_steps)
     writer = SummaryWriter(str(out / "tb"))
     metrics_file = open(out / "metrics.csv", "w", newline="")  # noqa: SIM115 - closed in finally
     csv_writer = csv.DictWriter(metrics_file, fieldnames=METRIC_COLUMNS, extrasaction="ignore")
     csv_writer.writeheader()
-    last_ckpt = [0]
+    for row in kept:
+        csv_writer.writerow({k: _csv_value(k, row.get(k, float("nan"))) for k in METRIC_COLUMNS})
+    metrics_file.flush()
 
     def on_eval(ag: MoPE, rec: dict[str, float]) -> None:
         rec.update(loss=ag.last_losses.get("loss", float("nan")), epsilon=ag.epsilon)
@@ -125,9 +186,11 @@ def train_run(config: Config, out_dir: str | Path, progress: bool = True, overwr
             writer.add_scalar(f"eval/{k}", rec[k], ag.global_step)
         for k, v in ag.last_losses.items():
             writer.add_scalar(f"train/{k}", v, ag.global_step)
-        if config.checkpoint_every and ag.global_step - last_ckpt[0] >= config.checkpoint_every:
+
+    def on_step(ag: MoPE) -> None:
+        if config.checkpoint_every and ag.global_step % config.checkpoint_every == 0:
             ag.save(out / "checkpoints" / f"step_{ag.global_step}.pt")
-            last_ckpt[0] = ag.global_step
+            ag.save(out / "checkpoints" / RESUME_CHECKPOINT, include_buffer=True)
 
     # SIGINT/SIGTERM set a flag that the training loop polls at each step boundary, so the interruption never
     # lands inside torch, the CSV writer or TensorBoard's writer thread.
@@ -136,26 +199,36 @@ def train_run(config: Config, out_dir: str | Path, progress: bool = True, overwr
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGINT, signal.SIGTERM):
             handlers[sig] = signal.signal(sig, lambda signum, frame: received.append(signum))
-    t0 = time.perf_counter()
+    remaining = config.total_steps - agent.global_step
     try:
-        records = agent.train(config.total_steps, eval_env=eval_env, callback=on_eval, progress=progress,
-                              stop=lambda: bool(received))
+        records = agent.train(remaining, eval_env=eval_env, callback=on_eval, progress=progress,
+                              stop=lambda: bool(received), on_step=on_step) if remaining > 0 else []
+    except TrainingDivergedError as exc:
+        last = out / "checkpoints" / RESUME_CHECKPOINT
+        where = f"the last good checkpoint is '{last}'" if last.is_file() else "no checkpoint was written before it"
+        raise TrainingDivergedError(f"{exc}; {where}") from None
     finally:
         for sig, old_handler in handlers.items():
             signal.signal(sig, old_handler)
         metrics_file.close()
         writer.close()
     if received:
-        agent.save(out / "checkpoints" / "interrupted.pt", include_buffer=True)
+        agent.save(out / "checkpoints" / RESUME_CHECKPOINT, include_buffer=True)
         raise KeyboardInterrupt(f"stopped by signal {received[0]} at step {agent.global_step}")
-    wall = time.perf_counter() - t0
     agent.save(out / "checkpoints" / "final.pt")
-    final = records[-1] if records else {}
-    write_solutions(out / "solutions.csv", agent.last_solutions)  # the final evaluation's solutions
-    summary = {"final": final, "wall_s": wall, "s_per_1k_steps": 1000 * wall / config.total_steps,
-               "algo": config.algo, "env_id": config.env_id, "seed": config.seed, "versions": _environment_info()}
+    all_records = kept + records
+    final = all_records[-1] if all_records else {}
+    if agent.last_solutions is not None:
+        write_solutions(out / "solutions.csv", agent.last_solutions)  # the final evaluation's solutions
+    summary = {"final": final, "wall_s": agent.wall_s, "s_per_1k_steps": 1000 * agent.wall_s / config.total_steps,
+               "algo": config.algo, "env_id": config.env_id, "seed": config.seed, "resumed": status == "resumable",
+               "versions": _environment_info()}
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    return RunResult(out, agent, records, final, wall)
+    return RunResult(out, agent, all_records, final, agent.wall_s)
+
+
+def _csv_value(key: str, value: float) -> float | int:
+    return int(value) if key == "step" else value
 
 
 def resolve_checkpoint(path: str | Path) -> Path:

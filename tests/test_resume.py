@@ -1,0 +1,141 @@
+"""Resumable training: a resumed run equals an uninterrupted one, step for step (issue 5 and 7).
+
+Covers: agent-level save/load mid-episode; ``mope train`` stopped by SIGINT, SIGTERM and SIGKILL, then
+``mope train --resume``; the run folder's resume bookkeeping (status, config mismatch, finished runs).
+"""
+
+from __future__ import annotations
+
+import csv
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mope import MoPE
+from mope.config import Config
+from mope.errors import MopeError
+from mope.experiments import RunFolderError, run_status, train_run
+
+SMALL = {"total_steps": 300, "eval_every": 100, "eval_prefs": 50, "n_omega": 8, "hidden_sizes": [32, 32],
+         "learning_starts": 50, "checkpoint_every": 100, "seed": 3}
+# slow enough (a few ms per step) that a signal lands mid-run, fast enough for CI
+SIGNALLED = {"total_steps": 1600, "eval_every": 200, "eval_prefs": 50, "n_omega": 8, "learning_starts": 100,
+             "checkpoint_every": 400, "seed": 1}
+
+
+def _metrics(run: Path) -> list[dict[str, str]]:
+    with open(run / "metrics.csv") as f:
+        rows = list(csv.DictReader(f))
+    for r in rows:
+        r.pop("wall_s")
+    return rows
+
+
+def test_agent_save_load_mid_episode_continues_identically(tmp_path):
+    cfg = Config.for_algo("mope", total_steps=400, learning_starts=50, n_omega=8, hidden_sizes=[32, 32], seed=5)
+    ref = MoPE("deep-sea-treasure-v0", cfg)
+    ref.train(400)
+    a = MoPE("deep-sea-treasure-v0", cfg)
+    a.train(237)
+    assert a._episode_actions, "the test must checkpoint inside an episode"
+    a.save(tmp_path / "mid.pt", include_buffer=True)
+    b = MoPE.load(tmp_path / "mid.pt")
+    np.testing.assert_array_equal(np.asarray(b._obs), np.asarray(a._obs))
+    b.train(163)
+    assert b.global_step == ref.global_step == 400 and b.episodes == ref.episodes
+    for p_ref, p_b in zip(ref.q_net.parameters(), b.q_net.parameters(), strict=True):
+        assert np.array_equal(p_ref.detach().numpy(), p_b.detach().numpy())
+    np.testing.assert_array_equal(ref.pref_sampler.counts, b.pref_sampler.counts)
+
+
+def test_train_run_resume_bookkeeping(tmp_path):
+    cfg = Config.for_algo("eql", **SMALL)
+    out = tmp_path / "run"
+    assert run_status(out) == "new"
+    ref = train_run(cfg, tmp_path / "ref", progress=False)
+    # a run that stopped after its step-200 checkpoint: fake it from a finished run by removing its end
+    train_run(cfg, out, progress=False)
+    (out / "summary.json").unlink()
+    (out / "checkpoints" / "final.pt").unlink()
+    full = MoPE.load(out / "checkpoints" / "resume.pt")
+    assert full.global_step == 300 and run_status(out) == "resumable"
+    # resuming from step 300 (= total) only finishes the folder
+    res = train_run(cfg, out, progress=False, resume=True)
+    assert run_status(out) == "finished" and res.agent.global_step == 300
+    assert _metrics(out) == _metrics(tmp_path / "ref")
+    assert res.final["cr"] == ref.final["cr"]
+    # a finished run is returned as it is
+    again = train_run(cfg, out, progress=False, resume=True)
+    assert again.final["cr"] == ref.final["cr"] and again.agent.global_step == 300
+    # another config is refused, naming the field
+    with pytest.raises(RunFolderError, match="total_steps"):
+        train_run(cfg.replace(total_steps=500), out, progress=False, resume=True)
+    # without --resume, an existing run is not clobbered
+    with pytest.raises(MopeError, match="already holds a run"):
+        train_run(cfg, out, progress=False)
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("ref") / "run"
+    train_run(Config.for_algo("mope", **SIGNALLED), out, progress=False)
+    return out
+
+
+def _train_cmd(out: Path) -> list[str]:
+    sets = [f"--set={k}={v}" for k, v in SIGNALLED.items() if k not in ("total_steps", "seed")]
+    return [sys.executable, "-m", "mope.cli", "train", "--algo", "mope", "--steps", str(SIGNALLED["total_steps"]),
+            "--seed", str(SIGNALLED["seed"]), "--out", str(out), "--no-progress", *sets]
+
+
+def _wait_for(path: Path, proc: subprocess.Popen, timeout: float = 300) -> None:
+    deadline = time.time() + timeout
+    while not path.exists():
+        assert proc.poll() is None, "training ended before the signal could be sent"
+        assert time.time() < deadline, f"{path} did not appear"
+        time.sleep(0.05)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM", "SIGKILL"])
+def test_killed_run_resumes_to_the_uninterrupted_result(tmp_path, uninterrupted, signame):
+    out = tmp_path / "run"
+    proc = subprocess.Popen(_train_cmd(out), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # SIGKILL right after the first periodic checkpoint; SIGINT/SIGTERM a little later, at an arbitrary step
+    _wait_for(out / "checkpoints" / "step_400.pt", proc)
+    if signame != "SIGKILL":
+        time.sleep(0.7)
+    proc.send_signal(getattr(signal, signame))
+    _, err = proc.communicate(timeout=120)
+    if signame == "SIGKILL":
+        assert proc.returncode == -signal.SIGKILL
+    else:
+        assert proc.returncode == 130, err
+        assert f"mope train --resume {out}" in err and "Traceback" not in err
+    assert run_status(out) == "resumable"
+    stopped_at = MoPE.load(out / "checkpoints" / "resume.pt").global_step
+    assert 400 <= stopped_at < SIGNALLED["total_steps"]
+
+    res = subprocess.run([sys.executable, "-m", "mope.cli", "train", "--resume", str(out), "--no-progress"],
+                         capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr
+    assert run_status(out) == "finished"
+    assert _metrics(out) == _metrics(uninterrupted)
+    final_ref = MoPE.load(uninterrupted / "checkpoints" / "final.pt")
+    final = MoPE.load(out / "checkpoints" / "final.pt")
+    for p_ref, p in zip(final_ref.q_net.parameters(), final.q_net.parameters(), strict=True):
+        assert np.array_equal(p_ref.detach().numpy(), p.detach().numpy())
+
+
+def test_resume_cli_errors(tmp_path):
+    res = subprocess.run([sys.executable, "-m", "mope.cli", "train", "--resume", str(tmp_path / "nothing")],
+                         capture_output=True, text=True)
+    assert res.returncode == 2 and "not a mope run folder" in res.stderr and "Traceback" not in res.stderr
+    res = subprocess.run([sys.executable, "-m", "mope.cli", "train", "--resume", str(tmp_path), "--steps", "5"],
+                         capture_output=True, text=True)
+    assert res.returncode == 2 and "drop --steps" in res.stderr

@@ -7,8 +7,6 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
 
 from mope.metrics import (
     DEFAULT_ATOL,
@@ -382,71 +380,5 @@ def test_errors_bad_prefs_and_shapes() -> None:
         match_matrix(CCS4, CCS4, atol=-1.0)
 
 
-# ------------------------------------------------------------------------------------------ properties
-# Integer coordinates keep distinct points >= 1 apart, far beyond the matching tolerance.
-int_points = (
-    st.integers(min_value=2, max_value=3)
-    .flatmap(lambda m: st.lists(st.tuples(*[st.integers(0, 10)] * m), min_size=1, max_size=12))
-    .map(lambda p: np.array(p, dtype=float))
-)
-
-float_points = (
-    st.integers(min_value=2, max_value=3)
-    .flatmap(
-        lambda m: st.lists(
-            st.tuples(*[st.floats(0.0, 10.0, allow_nan=False, allow_infinity=False)] * m),
-            min_size=1,
-            max_size=12,
-        )
-    )
-    .map(lambda p: np.array(p, dtype=float))
-)
-
-
-@settings(max_examples=50, deadline=None)
-@given(pts=int_points, found=float_points)
-def test_prop_cr_in_unit_interval(pts: np.ndarray, found: np.ndarray) -> None:
-    m = min(pts.shape[1], found.shape[1])
-    res = coverage_ratio(found[:, :m], convex_coverage_set(pts[:, :m]))
-    for v in (res.cr, res.precision, res.recall):
-        assert 0.0 <= v <= 1.0
-
-
-@settings(max_examples=50, deadline=None)
-@given(pts=int_points, seed=st.integers(0, 2**32 - 1))
-def test_prop_cr_one_when_found_is_ccs(pts: np.ndarray, seed: int) -> None:
-    ccs = convex_coverage_set(pts)
-    rng = np.random.default_rng(seed)
-    found = ccs[rng.integers(0, len(ccs), size=3 * len(ccs))]
-    found = np.vstack([found, ccs])[rng.permutation(4 * len(ccs))]  # every CCS point, shuffled, duplicated
-    res = coverage_ratio(found, ccs)
-    assert (res.cr, res.precision, res.recall) == (1.0, 1.0, 1.0)
-
-
-@settings(max_examples=50, deadline=None)
-@given(pts=float_points, extra=st.tuples(*[st.floats(-1.0, 10.0, allow_nan=False)] * 3))
-def test_prop_hv_monotone(pts: np.ndarray, extra: tuple[float, float, float]) -> None:
-    m = pts.shape[1]
-    ref = np.zeros(m)
-    before = hypervolume(pts, ref)
-    after = hypervolume(np.vstack([pts, np.array(extra[:m])]), ref)
-    assert after >= before - 1e-9 * max(1.0, before)
-
-
-@settings(max_examples=50, deadline=None)
-@given(pts=st.one_of(int_points, float_points))
-def test_prop_ccs_subset_of_front_subset_of_input(pts: np.ndarray) -> None:
-    front = pareto_front(pts)
-    ccs = convex_coverage_set(pts)
-    assert rows(ccs) <= rows(front) <= rows(pts)
-    assert len(front) >= 1 and len(ccs) >= 1
-
-
-@settings(max_examples=50, deadline=None)
-@given(pts=st.one_of(int_points, float_points), w_raw=st.lists(st.floats(0.01, 1.0), min_size=3, max_size=3))
-def test_prop_ccs_keeps_every_linear_optimum(pts: np.ndarray, w_raw: list[float]) -> None:
-    # for any preference, the best utility over the CCS equals the best over all points
-    w = np.array(w_raw[: pts.shape[1]])
-    w = w / w.sum()
-    ccs = convex_coverage_set(pts)
-    assert (ccs @ w).max() == pytest.approx((pts @ w).max(), abs=1e-9)
+# Property-based tests of these metrics (CR range, CR = 1 iff found = CCS, HV monotone, CCS subset of the
+# front) live in tests/test_properties.py.

@@ -6,8 +6,6 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
 
 from mope.errors import PreferenceError
 from mope.preferences import (
@@ -30,11 +28,7 @@ def assert_on_simplex(x: np.ndarray, atol: float = 1e-9) -> None:
 
 
 # ------------------------------------------------------------------------------------------- sample_simplex
-@pytest.mark.parametrize("m", [1, 2, 3, 6])
-def test_sample_simplex_rows_on_simplex(m: int) -> None:
-    x = sample_simplex(500, m, np.random.default_rng(0))
-    assert x.shape == (500, m)
-    assert_on_simplex(x)
+# Rows on the simplex for any n, m and seed: tests/test_properties.py::test_sample_simplex_on_simplex.
 
 
 def test_sample_simplex_seeded_reproducible_and_seed_dependent() -> None:
@@ -252,26 +246,7 @@ def test_sample_neighbours_m1() -> None:
     np.testing.assert_array_equal(nb, np.ones((2, 5, 1)))
 
 
-@st.composite
-def simplex_centers(draw: st.DrawFn) -> np.ndarray:
-    m = draw(st.sampled_from([2, 3]))
-    w = draw(st.lists(st.integers(0, 100), min_size=m, max_size=m).filter(lambda v: sum(v) > 0))
-    # vertices and edges come up often because 0 is an integer among 101
-    w = np.asarray(w, dtype=np.float64)
-    return w / w.sum()
-
-
-@settings(max_examples=50, deadline=None)
-@given(
-    center=simplex_centers(),
-    sigma=st.sampled_from([0.01, 0.04, 0.2]),
-    seed=st.integers(0, 2**16),
-)
-def test_sample_neighbours_property(center: np.ndarray, sigma: float, seed: int) -> None:
-    c = center[None, :]
-    nb = sample_neighbours(c, 64, sigma, np.random.default_rng(seed))
-    check_neighbours(c, nb, sigma)
-    assert np.any(np.linalg.norm(nb[0] - c[0], axis=-1) > 1e-9)
+# The property versions (any center, sigma and m = 2..5) live in tests/test_properties.py.
 
 
 # ------------------------------------------------------------------------------------------- partition

@@ -241,9 +241,9 @@ def group_runs(runs: Sequence[Run], swept: Sequence[str] | None = None,
         if extra:
             detail = "; ".join(f"{k}: " + ", ".join(sorted({_short(r.config.get(k)) for r in runs})) for k in extra)
             if not split_mismatched:
-                raise ReportError(f"runs differ in config beyond the swept fields ({', '.join(swept) or 'none'}): "
-                                  f"{detail}; report them separately, or pass --split-mismatched to group by "
-                                  "these fields too")
+                raise ReportError(f"runs differ in config beyond the seed and the swept fields "
+                                  f"({', '.join(swept) or 'none'}): {detail}; report them separately, or pass "
+                                  "--split-mismatched to group by these fields too")
             notes.append(f"runs differ beyond the swept fields; also grouped by {detail}")
             by = by + extra
     by = [k for k in by if k not in ("experience_exploration", "preference_exploration") or "algo" not in by]
@@ -303,7 +303,7 @@ def render_table(groups: Sequence[Group], metrics: Sequence[str]) -> str:
 def plot_learning_curves(groups: Sequence[Group], metrics: Sequence[str], path: str | Path, n_boot: int = 2000,
                          seed: int = 0) -> Path:
     """One panel per metric: each group's mean over seeds against steps, with a bootstrap 95% band."""
-    import matplotlib.pyplot as plt
+    from mope.plots import plt  # pyplot with the Agg backend
 
     fig, axes = plt.subplots(1, len(metrics), figsize=(4.6 * len(metrics), 3.8), squeeze=False)
     colors = _colors(groups)
@@ -329,9 +329,7 @@ def plot_learning_curves(groups: Sequence[Group], metrics: Sequence[str], path: 
 
 def _colors(groups: Sequence[Group]) -> list[str]:
     """The paper's colour per algorithm when each group is one algorithm; else matplotlib's cycle."""
-    import matplotlib.pyplot as plt
-
-    from mope.plots import COLORS
+    from mope.plots import COLORS, plt
 
     algos = [str(g.key.get("algo")) for g in groups]
     if len(set(algos)) == len(groups) and all(a in COLORS for a in algos):
@@ -371,9 +369,8 @@ def plot_final_fronts(groups: Sequence[Group], path: str | Path) -> Path | None:
 
     Returns ``None`` (and writes nothing) when no run has a ``solutions.csv``.
     """
-    import matplotlib.pyplot as plt
-
     from mope.metrics import unique_solutions
+    from mope.plots import plt  # pyplot with the Agg backend
 
     found = {}
     for g in groups:

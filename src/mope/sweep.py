@@ -323,8 +323,9 @@ def _run_trial(name: str, config_dict: dict[str, Any], out_dir: str) -> dict[str
         return {"name": name, "status": "finished", "action": action, "final": final,
                 "wall_s": time.perf_counter() - t0, "error": None}
     except Exception as exc:  # noqa: BLE001 - any failure of one trial is recorded, the sweep goes on
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "error.txt").write_text(traceback.format_exc())
+        with contextlib.suppress(OSError):  # the folder itself may be what failed; sweep.json keeps the error
+            out.mkdir(parents=True, exist_ok=True)
+            (out / "error.txt").write_text(traceback.format_exc())
         return {"name": name, "status": "failed", "action": "failed", "final": {},
                 "wall_s": time.perf_counter() - t0, "error": f"{type(exc).__name__}: {exc}"}
 

@@ -453,9 +453,11 @@ class MoPE:
         """
         data = load_checkpoint(path)
         try:
-            config = Config.from_dict({**data["config"], **overrides})
+            config = Config.from_dict(data["config"])
         except MopeError as exc:
             raise CheckpointError(f"checkpoint '{path}' holds an invalid config: {exc}") from None
+        if overrides:
+            config = Config.from_dict({**config.to_dict(), **overrides})  # a bad override is the caller's error
         agent = MoPE(env if env is not None else config.env_id, config)
         saved = data.get("env", {})
         if saved.get("n_objectives") not in (None, agent.m) or saved.get("n_actions") not in (None, agent.n_actions):

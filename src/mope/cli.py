@@ -138,6 +138,7 @@ def eval_(
     prefs: Annotated[int, typer.Option(help="Number of uniform preferences.")] = 2000,
     seed: Annotated[int | None, typer.Option(help="Seed of the preference set (default: the run's).")] = None,
     out: Annotated[Path | None, typer.Option(help="Solutions CSV (default next to the checkpoint).")] = None,
+    device: Annotated[str | None, typer.Option(help="cpu, cuda or auto (default: the run's).")] = None,
 ) -> None:
     """Evaluate a trained agent: CR, HV, EUM and more; writes the solution set as CSV."""
     from mope.experiments import evaluate_checkpoint, resolve_checkpoint
@@ -145,7 +146,7 @@ def eval_(
     try:
         ckpt = resolve_checkpoint(run_or_checkpoint)
         target = out or ckpt.parent / f"{ckpt.stem}_solutions_{prefs}.csv"
-        res, _ = evaluate_checkpoint(ckpt, prefs, seed, target)
+        res, _ = evaluate_checkpoint(ckpt, prefs, seed, target, device)
     except MopeError as exc:
         _fail(str(exc))
         return
@@ -158,12 +159,13 @@ def eval_(
 def act(
     checkpoint: Annotated[Path, typer.Argument(help="A run folder or a checkpoint file.")],
     pref: Annotated[str, typer.Option(help="Preference, e.g. 0.3,0.7.")],
+    device: Annotated[str | None, typer.Option(help="cpu, cuda or auto (default: the run's).")] = None,
 ) -> None:
     """Play one greedy episode under a preference and print its return vector."""
     from mope.experiments import play
 
     try:
-        sols = play(checkpoint, pref)
+        sols = play(checkpoint, pref, device)
     except MopeError as exc:
         _fail(str(exc))
         return
@@ -187,6 +189,7 @@ def reproduce_dst_cmd(
     algos: Annotated[str, typer.Option(help="Comma-separated variants.")] = "eql,ee,pe,mope",
     workers: Annotated[int, typer.Option(help="Parallel training processes.")] = 2,
     set_: Annotated[list[str] | None, typer.Option("--set", help="Config override for every run: KEY=VALUE.")] = None,
+    device: Annotated[str | None, typer.Option(help="cpu, cuda or auto.")] = None,
     progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
 ) -> None:
     """Fig. 2 and Fig. 3 of the paper on Deep-Sea-Treasure: four variants x seeds, figures and a table."""
@@ -195,7 +198,7 @@ def reproduce_dst_cmd(
     try:
         res = reproduce_dst(out, seeds=seeds, steps=steps, eval_every=eval_every,
                             algos=tuple(a.strip() for a in algos.split(",") if a.strip()), workers=workers,
-                            progress=progress, **_parse_sets(set_ or []))
+                            progress=progress, **{**_parse_sets(set_ or []), **({"device": device} if device else {})})
     except MopeError as exc:
         _fail(str(exc))
         return

@@ -247,12 +247,17 @@ def resolve_checkpoint(path: str | Path) -> Path:
     return p
 
 
+def load_agent(path: str | Path, device: str | None = None) -> MoPE:
+    """The agent of a checkpoint file or run folder (see :func:`resolve_checkpoint`), on ``device`` if given."""
+    return MoPE.load(resolve_checkpoint(path), **({"device": device} if device else {}))
+
+
 def evaluate_checkpoint(path: str | Path, n_prefs: int = 2000, seed: int | None = None,
-                        out: str | Path | None = None) -> tuple[dict[str, float], Solutions]:
+                        out: str | Path | None = None, device: str | None = None) -> tuple[dict[str, float], Solutions]:
     """Evaluate a checkpoint (or a run's final checkpoint) with the CR protocol; optionally write solutions."""
     if n_prefs < 1:
         raise MopeError(f"--prefs {n_prefs} is out of range: must be >= 1")
-    agent = MoPE.load(resolve_checkpoint(path))
+    agent = load_agent(path, device)
     c = agent.config
     evaluator = Evaluator(agent.env, c.env_id, c.gamma, n_prefs, c.seed if seed is None else seed,
                           c.max_episode_steps, c.ref_point)
@@ -263,8 +268,8 @@ def evaluate_checkpoint(path: str | Path, n_prefs: int = 2000, seed: int | None 
     return res, sols
 
 
-def play(path: str | Path, pref: Any) -> Solutions:
+def play(path: str | Path, pref: Any, device: str | None = None) -> Solutions:
     """Play one greedy episode of a checkpoint under ``pref``; return its :class:`Solutions` (one row)."""
-    agent = MoPE.load(resolve_checkpoint(path))
+    agent = load_agent(path, device)
     w = validate_preference(pref, agent.m)
     return solutions(agent, agent.env, w[None], agent.config.gamma, agent.config.max_episode_steps)

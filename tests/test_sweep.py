@@ -1,0 +1,184 @@
+"""`mope sweep`: spec validation, trial naming, the local and Ray backends, skip / resume / failure on re-run."""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+import signal
+from pathlib import Path
+
+import pytest
+import yaml
+
+from mope.agent import MoPE
+from mope.config import Config
+from mope.errors import MopeError
+from mope.experiments import train_run
+from mope.sweep import SweepError, apply_overrides, expand, load_spec, parse_set, parse_spec, run_sweep, trial_name
+
+TINY = {"env_id": "deep-sea-treasure-v0", "total_steps": 300, "eval_every": 100, "eval_prefs": 50, "n_omega": 4,
+        "batch_size": 8, "learning_starts": 50, "hidden_sizes": [16, 16], "disc_hidden": [16],
+        "checkpoint_every": 100}
+SPEC = {"name": "tiny", "base": TINY, "grid": {"algo": ["eql", "mope"]}, "seeds": 2}
+NAMES = ["deep-sea-treasure-v0-eql-s0", "deep-sea-treasure-v0-mope-s0", "deep-sea-treasure-v0-eql-s1",
+         "deep-sea-treasure-v0-mope-s1"]
+
+
+def metrics_without_wall(folder: Path) -> list[dict[str, str]]:
+    with open(folder / "metrics.csv") as f:
+        return [{k: v for k, v in row.items() if k != "wall_s"} for row in csv.DictReader(f)]
+
+
+@pytest.fixture(scope="module")
+def local_sweep(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("local")
+    results = run_sweep(parse_spec(SPEC), out, workers=2, progress=False)
+    assert [(r.name, r.status, r.action) for r in results] == [(n, "finished", "trained") for n in NAMES]
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# spec
+# ---------------------------------------------------------------------------------------------------------------
+def test_spec_expands_seed_major_with_readable_names(tmp_path: Path) -> None:
+    path = tmp_path / "s.yaml"
+    path.write_text(yaml.safe_dump({"base": {"total_steps": 500}, "grid": {"algo": ["eql", "mope"],
+                                    "sigma_omega": [0.02, 0.04]}, "seed": [3, 7]}))
+    spec = load_spec(path)
+    assert spec.name == "s" and spec.seeds == [3, 7]
+    trials = expand(spec)
+    assert len(trials) == 8
+    assert trials[0].name == "deep-sea-treasure-v0-eql-sigma_omega=0.02-s3"
+    assert trials[-1].name == "deep-sea-treasure-v0-mope-sigma_omega=0.04-s7"
+    assert [t.config.seed for t in trials] == [3] * 4 + [7] * 4
+    fifth = trials[5].config
+    assert fifth.algo == "eql" and fifth.sigma_omega == 0.04 and fifth.total_steps == 500
+    cfg = Config.for_algo("mope", hidden_sizes=(64, 64), seed=2)
+    assert trial_name(cfg, {"hidden_sizes": [64, 64], "double_q": False}) == \
+        "deep-sea-treasure-v0-mope-hidden_sizes=64,64-double_q=false-s2"
+
+
+@pytest.mark.parametrize(("spec", "message"), [
+    ({"grdi": {"algo": ["eql"]}}, "unknown spec key 'grdi' (did you mean 'grid'?)"),
+    ({"base": {"totl_steps": 5}}, "unknown config key 'totl_steps' in base (did you mean 'total_steps'?)"),
+    ({"grid": {"sigma_omgea": [0.1]}}, "unknown config key 'sigma_omgea' in grid (did you mean 'sigma_omega'?)"),
+    ({"seeds": 2, "seed": [0, 1]}, "seeds are given twice (seeds, seed); keep one"),
+    ({"seeds": 0}, "seeds=0 is out of range"),
+    ({"seeds": [1, 1]}, "seeds=[1, 1] lists a seed twice"),
+    ({"grid": {"algo": []}}, "grid.algo is an empty list"),
+    ({"grid": {"hidden_sizes": [64, 64]}}, "grid.hidden_sizes=[64, 64] must be a list of lists"),
+    ({"base": {"gamma": 0.9}, "grid": {"gamma": [0.9]}}, "'gamma' is both in base and in grid"),
+    ({"grid": {"algo": ["eql", "mopee"]}},
+     "trial (algo=mopee, seed=0): unknown algorithm 'mopee' (did you mean 'mope'?)"),
+    ({"grid": {"batch_size": [8, 0]}}, "trial (batch_size=0, seed=0): batch_size=0 is out of range"),
+    ({"name": "a/b"}, "name='a/b' must be a folder-safe name"),
+    ([1, 2], "a sweep spec must be a mapping"),
+])
+def test_bad_specs_name_the_bad_key(spec: object, message: str) -> None:
+    with pytest.raises(SweepError) as err:
+        expand(parse_spec(spec))
+    assert message in str(err.value)
+
+
+def test_nothing_is_launched_for_a_bad_trial_or_environment(tmp_path: Path) -> None:
+    base = {k: v for k, v in TINY.items() if k != "env_id"}
+    bad_env = {"base": base, "grid": {"env_id": ["deep-sea-treasure-v0", "deep-sea-treasur-v0"]}}
+    with pytest.raises(MopeError, match="unknown environment 'deep-sea-treasur-v0' \\(did you mean"):
+        run_sweep(parse_spec(bad_env), tmp_path / "a", progress=False)
+    with pytest.raises(SweepError, match="trial \\(learning_rate=-1, seed=0\\): learning_rate=-1 is out of range"):
+        run_sweep(parse_spec({"base": TINY, "grid": {"learning_rate": [0.001, -1]}, "seeds": 2}), tmp_path / "b",
+                  progress=False)
+    with pytest.raises(SweepError, match="unknown backend 'rey' \\(did you mean 'ray'\\?\\)"):
+        run_sweep(parse_spec(SPEC), tmp_path / "c", backend="rey")
+    with pytest.raises(SweepError, match="--address auto needs --backend ray"):
+        run_sweep(parse_spec(SPEC), tmp_path / "c", address="auto")
+    with pytest.raises(SweepError, match="workers=0 is out of range"):
+        run_sweep(parse_spec(SPEC), tmp_path / "c", workers=0)
+    with pytest.raises(SweepError, match="sweep spec '.*missing.yaml' does not exist"):
+        load_spec(tmp_path / "missing.yaml")
+    (tmp_path / "broken.yaml").write_text("grid: [unclosed")
+    with pytest.raises(SweepError, match="could not be parsed"):
+        load_spec(tmp_path / "broken.yaml")
+    assert not any((tmp_path / d).exists() for d in "abc")
+
+
+def test_overrides_pin_grid_axes_and_seeds() -> None:
+    spec = apply_overrides(parse_spec(SPEC), parse_set(["algo=mope", "total_steps=200", "hidden_sizes=[8, 8]"]),
+                           seeds=3)
+    assert spec.grid == {} and spec.seeds == [0, 1, 2]
+    trials = expand(spec)
+    assert [t.name for t in trials] == [f"deep-sea-treasure-v0-mope-s{s}" for s in range(3)]
+    assert trials[0].config.total_steps == 200 and trials[0].config.hidden_sizes == (8, 8)
+    with pytest.raises(SweepError, match="unknown config key 'totl_steps' \\(did you mean 'total_steps'\\?\\)"):
+        apply_overrides(parse_spec(SPEC), parse_set(["totl_steps=3"]))
+    with pytest.raises(SweepError, match="--set 'oops' is not KEY=VALUE"):
+        parse_set(["oops"])
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# backends
+# ---------------------------------------------------------------------------------------------------------------
+@pytest.mark.slow
+def test_local_and_ray_backends_agree(local_sweep: Path, tmp_path: Path) -> None:
+    ray = pytest.importorskip("ray")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        results = run_sweep(parse_spec(SPEC), tmp_path, backend="ray", progress=False)
+    finally:
+        ray.shutdown()
+    assert [(r.name, r.status, r.action) for r in results] == [(n, "finished", "trained") for n in NAMES]
+    for name in NAMES:
+        local_rows, ray_rows = metrics_without_wall(local_sweep / name), metrics_without_wall(tmp_path / name)
+        assert [r["step"] for r in local_rows] == ["100", "200", "300"]
+        assert local_rows == ray_rows, name
+        assert (local_sweep / name / "solutions.csv").read_text() == (tmp_path / name / "solutions.csv").read_text()
+    # the two algorithms differ, so agreement is not a coincidence of identical runs
+    assert metrics_without_wall(local_sweep / NAMES[0]) != metrics_without_wall(local_sweep / NAMES[1])
+    doc = json.loads((tmp_path / "sweep.json").read_text())
+    assert doc["backend"] == "ray" and doc["swept"] == ["algo", "seed"]
+    assert [t["status"] for t in doc["trials"]] == ["finished"] * 4
+
+
+@pytest.mark.slow
+def test_rerun_skips_finished_resumes_interrupted_and_records_failures(local_sweep: Path, tmp_path: Path,
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    spec = apply_overrides(parse_spec(SPEC), {"algo": "eql"}, seeds=3)
+    trials = expand(spec)
+    # seed 0: finished earlier -> skipped
+    shutil.copytree(local_sweep / trials[0].name, tmp_path / trials[0].name)
+    # seed 1: interrupted at step 150 by SIGINT (as Ctrl-C would) -> resumed from checkpoints/resume.pt
+    original_train = MoPE.train
+
+    def interrupted_train(self: MoPE, *args: object, stop: object = None, **kwargs: object) -> object:
+        def stop_at_150() -> bool:
+            if self.global_step == 150:
+                signal.raise_signal(signal.SIGINT)
+            return stop()  # type: ignore[operator]
+        return original_train(self, *args, stop=stop_at_150, **kwargs)
+
+    monkeypatch.setattr(MoPE, "train", interrupted_train)
+    with pytest.raises(KeyboardInterrupt):
+        train_run(trials[1].config, tmp_path / trials[1].name, progress=False)
+    monkeypatch.setattr(MoPE, "train", original_train)
+    assert (tmp_path / trials[1].name / "checkpoints" / "resume.pt").is_file()
+    assert not (tmp_path / trials[1].name / "summary.json").exists()
+    # seed 2: its folder cannot hold checkpoints -> failed, recorded, the others go on
+    (tmp_path / trials[2].name).mkdir()
+    (tmp_path / trials[2].name / "checkpoints").write_text("not a folder")
+
+    results = run_sweep(spec, tmp_path, workers=2, progress=False)
+    assert [(r.status, r.action) for r in results] == [("finished", "skipped"), ("finished", "resumed"),
+                                                      ("failed", "failed")]
+    assert "RunFolderError" in results[2].error
+    assert "RunFolderError" in (tmp_path / trials[2].name / "error.txt").read_text()
+    # the resumed run matches the uninterrupted one step for step
+    assert metrics_without_wall(tmp_path / trials[1].name) == metrics_without_wall(local_sweep / trials[1].name)
+    doc = json.loads((tmp_path / "sweep.json").read_text())
+    assert [t["status"] for t in doc["trials"]] == ["finished", "finished", "failed"]
+    assert doc["trials"][2]["error"].startswith("RunFolderError")
+
+    # a spec changed since: the finished folder of another config is refused before anything runs
+    changed = apply_overrides(spec, {"total_steps": 400})
+    with pytest.raises(SweepError, match="holds a run of another config: total_steps \\(300 there, 400 now\\)"):
+        run_sweep(changed, tmp_path, progress=False)

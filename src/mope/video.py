@@ -1,0 +1,101 @@
+"""Record one greedy rollout as an animated GIF (``mope act CHECKPOINT --pref ... --video out.gif``).
+
+Works for any environment that renders ``rgb_array`` frames: the Robot Confrontation Game, Deep-Sea-Treasure
+and the other MO-Gymnasium environments. The policy can be a mope agent (``act(obs, pref)``), a
+Stable-Baselines3 model (``predict(obs)``; the preference is then ignored: one model is one preference) or any
+callable ``obs -> action``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from mope.errors import MopeError
+
+
+class VideoError(MopeError):
+    """A rollout cannot be recorded (no ``rgb_array`` rendering, a bad path, an unusable policy)."""
+
+
+def _action_fn(policy: Any, pref: np.ndarray | None) -> Callable[[np.ndarray], Any]:
+    if hasattr(policy, "act") and hasattr(policy, "greedy_actions"):
+        if pref is None:
+            raise VideoError("a preference is needed to play a preference-conditioned agent (e.g. --pref 0.5,0.5)")
+        return lambda obs: policy.act(obs, pref)
+    if hasattr(policy, "predict"):
+        return lambda obs: policy.predict(obs, deterministic=True)[0]
+    if callable(policy):
+        return policy
+    raise VideoError(f"cannot play {type(policy).__name__}: need a mope agent, an SB3 model or a callable")
+
+
+def record_video(policy: Any, env_id: str, pref: Any, path: str | Path, seed: int = 0,
+                 max_steps: int | None = None, fps: int | None = None, **env_kwargs: Any) -> dict[str, Any]:
+    """Play one episode greedily under ``pref`` and write its frames as a GIF.
+
+    Args:
+        policy: A mope agent, an SB3 model or a callable ``obs -> action``.
+        env_id: The environment id (built with ``render_mode="rgb_array"``).
+        pref: The preference (for a mope agent; validated against the reward dimension).
+        path: Output ``.gif``.
+        seed: Reset seed of the episode.
+        max_steps: Episode length limit (default the registered limit, else 1000).
+        fps: Frames per second (default the environment's ``render_fps``, else 10).
+        **env_kwargs: Passed to the environment's constructor.
+
+    Returns:
+        ``{"path", "frames", "return" (undiscounted vector), "outcome" (``info["outcome"]`` if any)}``.
+    """
+    import imageio.v3 as iio
+    import mo_gymnasium as mo_gym
+
+    import mope.envs.confrontation  # noqa: F401 - registers the confrontation ids
+    from mope.envs import registered_ids
+    from mope.errors import suggest
+    from mope.preferences import validate_preference
+
+    out = Path(path)
+    if out.suffix.lower() != ".gif":
+        raise VideoError(f"video path '{out}' must end in .gif")
+    if env_id not in gym.registry:
+        raise VideoError(f"unknown environment '{env_id}'{suggest(env_id, registered_ids())}")
+    try:
+        env = mo_gym.make(env_id, render_mode="rgb_array", **env_kwargs)
+    except Exception as exc:  # noqa: BLE001 - missing dependencies or bad kwargs of the user's environment
+        raise VideoError(f"environment '{env_id}' could not be created for rendering: {exc}") from None
+    if "rgb_array" not in env.metadata.get("render_modes", []):
+        env.close()
+        raise VideoError(f"environment '{env_id}' cannot render rgb_array frames, so no video can be recorded")
+    m = int(env.unwrapped.reward_space.shape[0])
+    w = validate_preference(pref, m) if pref is not None else None
+    act = _action_fn(policy, w)
+    limit = max_steps or (env.spec.max_episode_steps if env.spec else None) or 1000
+    obs, info = env.reset(seed=seed)
+    frames = [_frame(env, env_id)]
+    total = np.zeros(m)
+    for _ in range(limit):
+        obs, r, term, trunc, info = env.step(act(obs))
+        total += np.asarray(r, dtype=np.float64)
+        frames.append(_frame(env, env_id))
+        if term or trunc:
+            break
+    rate = fps or env.metadata.get("render_fps") or 10
+    env.close()
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        iio.imwrite(out, np.stack(frames), duration=1000.0 / rate, loop=0)
+    except OSError as exc:
+        raise VideoError(f"cannot write '{out}': {exc.strerror or exc}") from None
+    return {"path": out, "frames": len(frames), "return": total, "outcome": info.get("outcome")}
+
+
+def _frame(env: Any, env_id: str) -> np.ndarray:
+    frame = env.render()
+    if frame is None or np.ndim(frame) != 3:
+        raise VideoError(f"environment '{env_id}' returned no rgb_array frame, so no video can be recorded")
+    return np.asarray(frame, dtype=np.uint8)

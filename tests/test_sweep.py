@@ -15,7 +15,18 @@ from mope.agent import MoPE
 from mope.config import Config
 from mope.errors import MopeError
 from mope.experiments import train_run
-from mope.sweep import SweepError, apply_overrides, expand, load_spec, parse_set, parse_spec, run_sweep, trial_name
+from mope.sweep import (
+    SweepError,
+    _run_trial_remote,
+    apply_overrides,
+    expand,
+    load_spec,
+    parse_set,
+    parse_spec,
+    run_sweep,
+    trial_name,
+    unpack_trial,
+)
 
 TINY = {"env_id": "deep-sea-treasure-v0", "total_steps": 300, "eval_every": 100, "eval_prefs": 50, "n_omega": 4,
         "batch_size": 8, "learning_starts": 50, "hidden_sizes": [16, 16], "disc_hidden": [16],
@@ -182,3 +193,18 @@ def test_rerun_skips_finished_resumes_interrupted_and_records_failures(local_swe
     changed = apply_overrides(spec, {"total_steps": 400})
     with pytest.raises(SweepError, match="holds a run of another config: total_steps \\(300 there, 400 now\\)"):
         run_sweep(changed, tmp_path, progress=False)
+
+
+def test_a_ray_node_without_the_sweep_folder_sends_the_trial_back(tmp_path: Path) -> None:
+    # a worker node that does not see <out>/sweep.json trains into a temporary folder and returns it packed
+    config = Config.for_algo("eql", **{**TINY, "total_steps": 60, "eval_every": 0, "learning_starts": 20})
+    rec = _run_trial_remote("t-s0", config.to_dict(), str(tmp_path / "elsewhere" / "t-s0"))
+    assert rec["status"] == "finished" and not (tmp_path / "elsewhere").exists()
+    out, archive = tmp_path / "sweep", rec["archive"]
+    unpack_trial(rec, out)
+    assert "archive" not in rec
+    assert {p.name for p in (out / "t-s0").iterdir()} >= {"config.json", "metrics.csv", "summary.json", "solutions.csv"}
+    assert (out / "t-s0" / "checkpoints" / "final.pt").is_file()
+    assert not (out / "t-s0" / "checkpoints" / "resume.pt").exists()
+    with pytest.raises(SweepError, match="holds files outside its folder"):
+        unpack_trial({"name": "other", "archive": archive}, out)

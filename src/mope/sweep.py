@@ -330,6 +330,45 @@ def _run_trial(name: str, config_dict: dict[str, Any], out_dir: str) -> dict[str
                 "wall_s": time.perf_counter() - t0, "error": f"{type(exc).__name__}: {exc}"}
 
 
+def _run_trial_remote(name: str, config_dict: dict[str, Any], out_dir: str) -> dict[str, Any]:
+    """Ray task: :func:`_run_trial`, in place when this node sees the sweep folder (a shared filesystem).
+
+    Otherwise (a worker node or Ray Client cluster without the driver's filesystem) the trial trains into a
+    temporary folder and comes back packed in ``rec["archive"]`` (a gzipped tar, without the resume checkpoint),
+    for the driver to unpack into the sweep folder.
+    """
+    import io
+    import tarfile
+    import tempfile
+
+    if (Path(out_dir).parent / "sweep.json").is_file():
+        return _run_trial(name, config_dict, out_dir)
+    with tempfile.TemporaryDirectory(prefix="mope-trial-") as tmp:
+        rec = _run_trial(name, config_dict, str(Path(tmp) / name))
+        buf = io.BytesIO()
+        with tarfile.open(fileobj=buf, mode="w:gz") as tar:
+            tar.add(Path(tmp) / name, arcname=name,
+                    filter=lambda info: None if info.name.endswith(("resume.pt", "interrupted.pt")) else info)
+        rec["archive"] = buf.getvalue()
+    return rec
+
+
+def unpack_trial(rec: dict[str, Any], out: Path) -> None:
+    """Unpack a trial folder that a Ray task sent back (see :func:`_run_trial_remote`) into the sweep folder."""
+    import io
+    import tarfile
+
+    archive = rec.pop("archive", None)
+    if archive is None:
+        return
+    with tarfile.open(fileobj=io.BytesIO(archive), mode="r:gz") as tar:
+        names = tar.getnames()
+        if any((n != rec["name"] and not n.startswith(rec["name"] + "/")) or ".." in Path(n).parts for n in names):
+            raise SweepError(f"the archive of trial '{rec['name']}' holds files outside its folder")
+        safe = {"filter": "data"} if hasattr(tarfile, "data_filter") else {}  # Python >= 3.11.4
+        tar.extractall(out, **safe)
+
+
 def _init_worker() -> None:
     import torch
 
@@ -383,7 +422,7 @@ def _local_backend(jobs: list[tuple[str, dict[str, Any], str]], workers: int,
     pool.shutdown(wait=True)
 
 
-def _ray_backend(jobs: list[tuple[str, dict[str, Any], str]], workers: int | None, address: str | None,
+def _ray_backend(jobs: list[tuple[str, dict[str, Any], str]], out: Path, workers: int | None, address: str | None,
                  on_done: Callable[[dict[str, Any]], None], on_running: Callable[[int], None]) -> None:
     try:
         import ray
@@ -391,9 +430,9 @@ def _ray_backend(jobs: list[tuple[str, dict[str, Any], str]], workers: int | Non
         raise SweepError(RAY_MISSING) from None
     started = False
     if not ray.is_initialized():
-        kwargs: dict[str, Any] = {"address": address, "include_dashboard": False, "log_to_driver": False}
-        if address is None and workers is not None:
-            kwargs["num_cpus"] = workers
+        # a local instance sized to --workers; a cluster (or Ray Client, ray://) takes only its address
+        kwargs: dict[str, Any] = {"address": address} if address is not None else \
+            {"include_dashboard": False, "log_to_driver": False, "num_cpus": workers}
         try:
             ray.init(**kwargs)
         except (ConnectionError, ValueError, RuntimeError) as exc:
@@ -401,7 +440,7 @@ def _ray_backend(jobs: list[tuple[str, dict[str, Any], str]], workers: int | Non
         started = True
     try:
         slots = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
-        remote = ray.remote(num_cpus=1, max_retries=0)(_run_trial)
+        remote = ray.remote(num_cpus=1, max_retries=0)(_run_trial_remote)
         queue = list(jobs)
         pending: list[Any] = []
         while queue or pending:
@@ -409,7 +448,9 @@ def _ray_backend(jobs: list[tuple[str, dict[str, Any], str]], workers: int | Non
                 pending.append(remote.remote(*queue.pop(0)))
             ready, pending = ray.wait(pending, num_returns=1, timeout=1.0)
             for ref in ready:
-                on_done(ray.get(ref))
+                rec = ray.get(ref)
+                unpack_trial(rec, out)
+                on_done(rec)
             on_running(len(pending))
     finally:
         if started:
@@ -484,7 +525,7 @@ def run_sweep(spec: SweepSpec | str | Path, out_dir: str | Path | None = None, b
         if jobs and backend == "local":
             _local_backend(jobs, min(workers or os.cpu_count() or 1, len(jobs)), on_done, on_running)
         elif jobs:
-            _ray_backend(jobs, workers, address, on_done, on_running)
+            _ray_backend(jobs, out, workers, address, on_done, on_running)
     finally:
         summary_line.close()
         state["wall_s"] = time.perf_counter() - t0

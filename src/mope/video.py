@@ -8,6 +8,7 @@ callable ``obs -> action``.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -65,7 +66,9 @@ def record_video(policy: Any, env_id: str, pref: Any, path: str | Path, seed: in
     if env_id not in gym.registry:
         raise VideoError(f"unknown environment '{env_id}'{suggest(env_id, registered_ids())}")
     try:
-        env = mo_gym.make(env_id, render_mode="rgb_array", **env_kwargs)
+        with warnings.catch_warnings():  # an env without rgb_array warns here; the check below says it plainly
+            warnings.filterwarnings("ignore", message=".*not in the possible render_modes.*")
+            env = mo_gym.make(env_id, render_mode="rgb_array", **env_kwargs)
     except Exception as exc:  # noqa: BLE001 - missing dependencies or bad kwargs of the user's environment
         raise VideoError(f"environment '{env_id}' could not be created for rendering: {exc}") from None
     if "rgb_array" not in env.metadata.get("render_modes", []):

@@ -1,0 +1,118 @@
+"""PPO baseline, GIF rollouts and ``reproduce_confrontation`` (tiny budgets)."""
+
+from __future__ import annotations
+
+import json
+
+import imageio.v3 as iio
+import mo_gymnasium as mo_gym
+import numpy as np
+import pytest
+
+import mope.envs.confrontation as C
+from mope.baselines import Episodes, play_episodes, train_ppo
+from mope.errors import ConfigError, MopeError
+from mope.reproduce_confrontation import reproduce_confrontation, speed_class, strategy_diversity, summarize
+from mope.video import VideoError, record_video
+
+
+def make() -> C.RobotConfrontationDiscreteEnv:
+    return mo_gym.make(C.DISCRETE_ID).unwrapped
+
+
+def test_play_episodes_matches_sequential_play() -> None:
+    def policy(obs: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        return (idx * 3 + 1) % 15
+
+    eps = play_episodes(policy, make, 3, [4, 5, 6], max_steps=40, gamma=0.9, record=True)
+    for i, seed in enumerate([4, 5, 6]):
+        env = make()
+        env.reset(seed=seed)
+        total, disc, g, steps = np.zeros(2), np.zeros(2), 1.0, 0
+        for _ in range(40):
+            _, r, term, _, info = env.step((i * 3 + 1) % 15)
+            steps += 1
+            total += r
+            disc += g * r
+            g *= 0.9
+            if term:
+                break
+        assert np.allclose(eps.returns[i], total) and np.allclose(eps.discounted[i], disc)
+        assert eps.lengths[i] == steps and eps.outcomes[i] == info["outcome"]
+        assert eps.histories[i].shape == (steps + 1, 2, 4)
+    with pytest.raises(ConfigError, match="2 seeds for 3 episodes"):
+        play_episodes(policy, make, 3, [1, 2], 5)
+
+
+def test_strategy_diversity_counts_outcome_and_speed_types() -> None:
+    assert list(speed_class(np.array([0.0, 0.2, 0.3, 0.5]), 0.5)) == [0, 1, 1, 2]
+    outcomes = [["red_win", "red_win", "blue_win"], ["red_win"] * 3, ["blue_win"] * 3, ["running"] * 3]
+    d = strategy_diversity(outcomes, np.array([0.45, 0.45, 0.45, 0.05]), 0.5)
+    # (red_win, fast) twice, (blue_win, fast), (running, slow): 3 strategies, entropy of (1/2, 1/4, 1/4) = 1.5
+    assert d == {"strategies": 3, "entropy_bits": pytest.approx(1.5)}
+
+
+def test_summarize_rates_and_hypervolume() -> None:
+    prefs = np.array([[0.0, 1.0], [1.0, 0.0]])
+    eps = Episodes(returns=np.array([[10.0, 2.0], [-10.0, 4.0], [-20.0, -10.0], [-30.0, 6.0]]),
+                   discounted=np.zeros((4, 2)), lengths=np.array([20, 40, 10, 150]),
+                   outcomes=["red_win", "blue_win", "red_out", "running"])
+    s = summarize(prefs, eps, 2, np.array([-100.0, -20.0]), dt=0.2, v_max=0.5)
+    assert np.allclose(s["points"], [[0.0, 3.0], [-25.0, -2.0]])
+    assert (s["win"], s["loss"], s["out"], s["timeout"]) == (0.25, 0.25, 0.25, 0.25)
+    assert s["hv"] == pytest.approx(100 * 23)  # the first point dominates the second
+    assert s["r_catch"] == pytest.approx(-12.5)
+
+
+def test_train_ppo_learns_a_policy_of_the_right_shape() -> None:
+    model = train_ppo([0.5, 0.5], 128, seed=0)
+    obs, _ = mo_gym.make(C.CONTINUOUS_ID).reset(seed=0)
+    act = model.predict(obs, deterministic=True)[0]
+    assert act.shape == (2,)
+    with pytest.raises(MopeError, match="sums to"):
+        train_ppo([0.5, 0.6], 128)
+
+
+def test_record_video_writes_every_frame(tmp_path) -> None:
+    info = record_video(lambda obs: 7, C.DISCRETE_ID, None, tmp_path / "game.gif", seed=3, max_steps=6)
+    frames = iio.imread(tmp_path / "game.gif")
+    assert info["frames"] == 7 and len(frames) == 7 and frames.shape[-1] in (3, 4)
+    assert info["return"].shape == (2,) and info["outcome"] in C.OUTCOMES
+
+
+def test_record_video_on_deep_sea_treasure_and_errors(tmp_path) -> None:
+    info = record_video(lambda obs: 1, "deep-sea-treasure-v0", [0.5, 0.5], tmp_path / "dst.gif", max_steps=3)
+    assert info["frames"] == 2 and info["return"][0] == pytest.approx(0.7)  # one step down: the first treasure
+    with pytest.raises(VideoError, match="cannot render rgb_array"):
+        record_video(lambda obs: 0, "fishwood-v0", None, tmp_path / "f.gif", max_steps=2)
+    with pytest.raises(VideoError, match="did you mean"):
+        record_video(lambda obs: 0, "deep-sea-treasur-v0", None, tmp_path / "f.gif")
+    with pytest.raises(VideoError, match=r"\.gif"):
+        record_video(lambda obs: 0, C.DISCRETE_ID, None, tmp_path / "f.mp4")
+
+
+def test_reproduce_rejects_bad_arguments(tmp_path) -> None:
+    with pytest.raises(ConfigError, match="ppo_budget"):
+        reproduce_confrontation(tmp_path, ppo_budget="half")
+    with pytest.raises(ConfigError, match="episodes=0"):
+        reproduce_confrontation(tmp_path, episodes=0)
+    with pytest.raises(ConfigError, match="per PPO policy"):
+        reproduce_confrontation(tmp_path, steps=100, ppo_budget="shared")
+
+
+@pytest.mark.slow
+def test_reproduce_confrontation_tiny(tmp_path) -> None:
+    r = reproduce_confrontation(tmp_path, steps=250, ppo_prefs=2, eval_prefs=3, episodes=2, workers=1,
+                                progress=False, n_omega=4, learning_starts=100)
+    for name in ("fig5_front.png", "fig6_trajectories.png", "table.md", "results.json"):
+        assert (tmp_path / name).is_file()
+    res = json.loads((tmp_path / "results.json").read_text())["results"]
+    assert set(res) == {"ppo", "eql", "mope"}
+    for m, n_sol in (("ppo", 2), ("eql", 3), ("mope", 3)):
+        rates = sum(res[m][k]["mean"] for k in ("win", "loss", "out", "blue_out", "timeout"))
+        assert rates == pytest.approx(1.0) and res[m]["solutions"] == n_sol
+    assert "| mope | 1 x 3 |" in r["table"]
+    # a second call reuses every finished run
+    again = reproduce_confrontation(tmp_path, steps=250, ppo_prefs=2, eval_prefs=3, episodes=2, workers=1,
+                                    progress=False, n_omega=4, learning_starts=100)
+    assert again["train_wall_s"] < r["train_wall_s"]

@@ -392,7 +392,8 @@ def plot_final_fronts(groups: Sequence[Group], path: str | Path) -> Path | None:
             pts = found[g.label]
             if pts.shape[1] < 2:
                 continue
-            ax.scatter(pts[:, 0], pts[:, 1], s=30, marker=markers[i % len(markers)], alpha=0.8, color=color_of[g.label],
+            ax.scatter(pts[:, 0], pts[:, 1], s=max(12, 120 // 2**i), marker=markers[i % len(markers)], alpha=0.8,
+                       color=color_of[g.label],
                        label=f"{g.label} ({len(pts)} distinct)")
         ax.set_xlabel("objective 0 (discounted return)")
         ax.set_ylabel("objective 1 (discounted return)")

@@ -43,8 +43,10 @@ def save_checkpoint(path: str | Path, payload: dict[str, Any]) -> Path:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     except OSError as exc:
-        raise CheckpointError(f"cannot write checkpoint '{path}': folder '{path.parent}' is not writable "
-                              f"({exc.strerror or exc})") from None
+        blocker = next((a for a in path.parents if a.exists() and not a.is_dir()), None)
+        reason = f"'{blocker}' is a file, not a folder" if blocker else exc.strerror or str(exc)
+        raise CheckpointError(f"cannot write checkpoint '{path}': folder '{path.parent}' is not writable ({reason})"
+                              ) from None
     umask = os.umask(0)
     os.umask(umask)
     os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file the permissions of an ordinary write
@@ -105,11 +107,20 @@ def _check_archive(path: Path) -> None:
     """
     try:
         if not zipfile.is_zipfile(path):
+            with open(path, "rb") as f:
+                starts_as_zip = f.read(4) == b"PK\x03\x04"
+            if starts_as_zip:  # a zip checkpoint whose end (the central directory) is missing
+                raise CheckpointError(f"checkpoint '{path}' is truncated or corrupt (the archive is incomplete)")
             return
         with zipfile.ZipFile(path) as archive:
             bad = archive.testzip()
+    except CheckpointError:
+        raise
     except Exception as exc:  # noqa: BLE001 - BadZipFile, OSError, UnicodeDecodeError, NotImplementedError, ...
-        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        if isinstance(exc, OSError) and not isinstance(exc, zipfile.BadZipFile):
+            first = "the archive is incomplete"
+        else:
+            first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise CheckpointError(f"checkpoint '{path}' is truncated or corrupt ({first[:200]})") from None
     if bad is not None:
         raise CheckpointError(f"checkpoint '{path}' is corrupt (checksum mismatch in '{bad}')")

@@ -166,9 +166,12 @@ def test_blue_picks_the_action_with_maximum_threat() -> None:
 
 
 def test_blue_avoids_the_wall() -> None:
-    env = env_at(state(0, 2.0, 90, 0.3), state(0, 2.2, 90, 0.5))  # red below blue, blue heading at the wall
-    a, w = env.blue_action()
-    assert w != 0.0  # going straight would leave the arena within the safety time
+    red, blue = state(2.3, 0.0, 90, 0.1), state(1.8, 0.0, 0, 0.5)  # red near the right wall, blue heading there
+    greedy = env_at(red, blue, blue_safety_time=0).blue_action()
+    careful = env_at(red, blue).blue_action()  # default: drop actions that leave the arena within 1.5 s
+    reach = C._arc_points(blue, np.stack([greedy, careful]), 1.5, 0.5)[..., 0].max(axis=1)
+    assert reach[0] > 2.5 and reach[1] <= 2.5
+    assert np.allclose(greedy, [0.0, 0.4]) and np.allclose(careful, [-0.2, 0.4])
 
 
 # --- spaces, registration, discretisation, rendering -----------------------------------------------------------

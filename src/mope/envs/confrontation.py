@@ -581,8 +581,8 @@ def plot_geometry(path: str | Path) -> Path:
     import matplotlib.pyplot as plt
     from matplotlib.patches import Arc
 
-    red = np.array([0.0, 0.0, math.radians(25), 1.0])
-    blue = np.array([2.0, 0.6, math.radians(60), 1.0])
+    red = np.array([0.0, 0.0, math.radians(45), 1.0])
+    blue = np.array([2.0, 0.6, math.radians(75), 1.0])
     q_r, q_b, beta, d = engagement_angles(red, blue)
     los = math.atan2(blue[1] - red[1], blue[0] - red[0])
     fig, ax = plt.subplots(figsize=(6.0, 3.6))
@@ -596,16 +596,16 @@ def plot_geometry(path: str | Path) -> Path:
         ax.text(s[0] - 0.15, s[1] - 0.25, f"{name}\nheading θ", color=color, fontsize=8, ha="center", va="top")
     # q_r: between red's heading and the line red -> blue
     ax.add_patch(Arc((0, 0), 1.0, 1.0, theta1=math.degrees(los), theta2=math.degrees(red[2]), color="tab:red"))
-    ax.text(0.55, 0.28, f"q_r = {math.degrees(q_r):.0f}°", color="tab:red", fontsize=9)
+    ax.text(-0.55, 0.45, f"q_r = {math.degrees(q_r):.0f}°", color="tab:red", fontsize=9)
     # q_b: between blue's heading and the line blue -> red
     back = math.degrees(los + math.pi)
     ax.add_patch(Arc(blue[:2], 0.8, 0.8, theta1=math.degrees(blue[2]), theta2=back, color="tab:blue"))
-    ax.text(blue[0] - 0.1, blue[1] + 0.5, f"q_b = {math.degrees(q_b):.0f}°", color="tab:blue", fontsize=9)
+    ax.text(blue[0] - 1.1, blue[1] + 0.45, f"q_b = {math.degrees(q_b):.0f}°", color="tab:blue", fontsize=9)
     # beta: between the headings (red's heading drawn again at blue)
     ax.annotate("", xy=(blue[0] + ext * math.cos(red[2]), blue[1] + ext * math.sin(red[2])), xytext=blue[:2],
                 arrowprops={"arrowstyle": "->", "color": "tab:red", "lw": 1, "ls": ":"})
     ax.add_patch(Arc(blue[:2], 1.3, 1.3, theta1=math.degrees(red[2]), theta2=math.degrees(blue[2]), color="k"))
-    ax.text(blue[0] + 0.72, blue[1] + 0.42, f"β = {math.degrees(beta):.0f}°", fontsize=9)
+    ax.text(blue[0] + 0.7, blue[1] + 0.3, f"β = {math.degrees(beta):.0f}°", fontsize=9)
     ax.set_title("Red wins when q_r < 30°, q_b > 30°, β < 40°, d < 0.3 m (eq. 10); blue wins under the mirror",
                  fontsize=8)
     ax.set_aspect("equal")

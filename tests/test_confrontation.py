@@ -275,3 +275,18 @@ def test_balance_pursuer_beats_blue_and_blue_beats_random() -> None:
             outcomes[name].append(info["outcome"])
     assert outcomes["pursuer"].count("red_win") >= 3
     assert outcomes["random"].count("blue_win") >= 6
+
+
+def test_mope_agent_trains_and_evaluates_on_the_discrete_id() -> None:
+    from mope.agent import MoPE
+    from mope.evaluation import Evaluator
+
+    agent = MoPE(C.DISCRETE_ID, seed=0, n_omega=4, learning_starts=16, batch_size=8, total_steps=40)
+    agent.train(40)
+    assert agent.global_step == 40 and agent.n_actions == 15 and agent.m == 2
+    ev = Evaluator(make_env(C.DISCRETE_ID), C.DISCRETE_ID, 0.99, n_prefs=3, seed=0, max_steps=12,
+                   ref_point=C.reference_point(0.99, 12))
+    res, sols = ev.evaluate(agent)
+    assert sols.returns.shape == (3, 2) and np.all(sols.lengths <= 12)
+    assert np.all(sols.discounted >= C.worst_return(0.99, 12) - 1e-6)
+    assert res["hv"] > 0

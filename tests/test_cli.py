@@ -117,3 +117,18 @@ def test_envs_lists_discrete_action_environments_only():
     listed = res.stdout.split()
     assert "deep-sea-treasure-v0" in listed and "four-room-v0" in listed
     assert "mo-mountaincarcontinuous-v0" not in listed
+
+
+def test_sweep_and_report_commands_fail_cleanly_on_bad_input(tmp_path):
+    spec = tmp_path / "bad.yaml"
+    spec.write_text("grid:\n  algo: [eql, mopee]\n")
+    res = mope_cli("sweep", str(spec), "--out", str(tmp_path / "s"))
+    assert res.returncode == 2 and "mopee" in res.stderr and "Traceback" not in res.stderr
+    res = mope_cli("report", str(tmp_path / "empty"))
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+
+
+def test_usage_errors_are_one_line():
+    res = mope_cli("train", "--steps", "abc")
+    assert res.returncode == 2
+    assert res.stderr.strip().startswith("error:") and len(res.stderr.strip().splitlines()) == 1

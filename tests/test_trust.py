@@ -301,14 +301,10 @@ def test_cli_eval_prefs_out_of_range(ckpt: Path) -> None:
     assert_cli_error(cli("eval", str(ckpt), "--prefs", "0"), "--prefs 0", ">= 1")
 
 
-@pytest.mark.xfail(reason="cli._parse_sets lets int('a') escape; proposed fix in the issue-7 audit report",
-                   strict=False)
 def test_cli_set_list_of_non_integers(tmp_path: Path) -> None:
     assert_cli_error(cli("train", "--set", "hidden_sizes=a,b", "--out", str(tmp_path / "x")), "hidden_sizes")
 
 
-@pytest.mark.xfail(reason="click usage errors print a multi-line panel; proposed fix in the issue-7 audit report",
-                   strict=False)
 @pytest.mark.parametrize("args", [["train", "--steps", "abc"], ["train", "--sigma-omgea", "1"], ["act", "x.pt"]])
 def test_cli_usage_error_is_one_line(args: list[str], monkeypatch: pytest.MonkeyPatch,
                                      capsys: pytest.CaptureFixture[str]) -> None:
@@ -418,8 +414,6 @@ def test_load_into_other_number_of_objectives_is_named(ckpt: Path) -> None:
            "2 objectives", "3 objectives")
 
 
-@pytest.mark.xfail(reason="MoPE.load does not call checkpoint.check_compatible yet; see the issue-7 audit report",
-                   strict=False)
 def test_load_into_same_shaped_other_env(ckpt: Path) -> None:
     raises(CheckpointError, lambda: MoPE.load(ckpt, env=make_env("deep-sea-treasure-concave-v0")),
            "another environment", "deep-sea-treasure-v0", "deep-sea-treasure-concave-v0")

@@ -28,7 +28,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from mope.checkpoint import load_checkpoint, save_checkpoint
+from mope.checkpoint import check_compatible, load_checkpoint, save_checkpoint
 from mope.config import Config
 from mope.envs import check_env_fits, make_env
 from mope.errors import CheckpointError, MopeError
@@ -459,13 +459,8 @@ class MoPE:
         if overrides:
             config = Config.from_dict({**config.to_dict(), **overrides})  # a bad override is the caller's error
         agent = MoPE(env if env is not None else config.env_id, config)
-        saved = data.get("env", {})
-        if saved.get("n_objectives") not in (None, agent.m) or saved.get("n_actions") not in (None, agent.n_actions):
-            raise CheckpointError(
-                f"checkpoint '{path}' was trained on '{config.env_id}' with {saved.get('n_objectives')} objectives and "
-                f"{saved.get('n_actions')} actions; the given environment has {agent.m} objectives and "
-                f"{agent.n_actions} actions"
-            )
+        check_compatible(data, path, agent.config.env_id, agent.m, agent.n_actions, tuple(agent.obs_shape),
+                         same_env="env_id" not in overrides)
         try:
             agent.load_state_dict(data)
         except (RuntimeError, KeyError) as exc:

@@ -1,4 +1,4 @@
-"""The ``mope`` command line: train, eval, act, envs.
+"""The ``mope`` command line: train, eval, act, sweep, report, reproduce, envs.
 
 Every bad input ends in one line ``error: ...`` on stderr and exit code 2, never a traceback.
 """
@@ -12,8 +12,8 @@ from typing import Annotated, Any
 
 import typer
 
-from mope.config import ALGOS, Config
-from mope.errors import ConfigError, MopeError, suggest
+from mope.config import ALGOS, Config, unknown_key_error
+from mope.errors import ConfigError, MopeError, one_line, suggest
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Multi-objective RL with Preference Exploration (MoPE) and Envelope Q-learning.")
@@ -34,11 +34,16 @@ def _parse_sets(items: list[str]) -> dict[str, Any]:
         key, raw = item.split("=", 1)
         key = key.strip().replace("-", "_")
         if key not in names:
-            raise ConfigError(f"unknown config key '{key}'{suggest(key, names)}")
+            raise unknown_key_error(key)
         try:
             value = json.loads(raw)
         except json.JSONDecodeError:
-            value = [int(x) for x in raw.split(",")] if key in ("hidden_sizes", "disc_hidden") else raw
+            value = raw
+            if key in ("hidden_sizes", "disc_hidden"):
+                try:
+                    value = [int(x) for x in raw.split(",")]
+                except ValueError:
+                    raise ConfigError(f"--set {key}={raw!r} is not a comma-separated list of integers") from None
         out[key] = value
     return out
 
@@ -207,6 +212,45 @@ def reproduce_dst_cmd(
 
 
 @app.command()
+def sweep(
+    spec: Annotated[Path, typer.Argument(help="YAML sweep spec (see examples/sweep-dst.yaml).")],
+    backend: Annotated[str, typer.Option(help="local (processes) or ray.")] = "local",
+    address: Annotated[str | None, typer.Option(help="Ray address: auto, ray://host:10001.")] = None,
+    workers: Annotated[int | None, typer.Option(help="Trials at once (default: all cores).")] = None,
+    out: Annotated[Path | None, typer.Option(help="Sweep folder (default runs/<name>).")] = None,
+    set_: Annotated[list[str] | None, typer.Option("--set", help="Override/pin: --set total_steps=5000.")] = None,
+    seeds: Annotated[int | None, typer.Option(help="Run seeds 0..N-1.")] = None,
+    progress: Annotated[bool, typer.Option(help="Show the live summary.")] = True,
+) -> None:
+    """Run a grid of trainings; re-running skips finished trials and resumes interrupted ones."""
+    from mope.sweep import sweep_command
+
+    try:
+        results = sweep_command(spec, out, backend, address, workers, set_, seeds, progress)
+    except MopeError as exc:
+        _fail(str(exc))
+        return
+    if any(r.status == "failed" for r in results):
+        raise typer.Exit(1)
+
+
+@app.command()
+def report(
+    runs_dir: Annotated[Path, typer.Argument(help="Sweep folder or any folder of runs.")],
+    out: Annotated[Path | None, typer.Option(help="Output folder (default RUNS_DIR/report).")] = None,
+    split_mismatched: Annotated[bool, typer.Option(
+        help="Group runs that differ beyond the swept fields separately.")] = False,
+) -> None:
+    """Aggregate runs across seeds: table (mean, std, bootstrap 95% CI, IQM), curves and fronts."""
+    from mope.report import report_command
+
+    try:
+        report_command(runs_dir, out, split_mismatched)
+    except MopeError as exc:
+        _fail(str(exc))
+
+
+@app.command()
 def envs() -> None:
     """List MO-Gymnasium environments mope's agents can use directly (discrete actions)."""
     import warnings
@@ -229,12 +273,21 @@ def envs() -> None:
 
 
 def main() -> None:
-    """Entry point of the ``mope`` script."""
+    """Entry point of the ``mope`` script: usage errors and library errors are one ``error:`` line, exit 2."""
+    from typer._click.exceptions import NoArgsIsHelpError, UsageError
+
     try:
-        app()
+        rv = app(standalone_mode=False)
+    except UsageError as exc:
+        if not isinstance(exc, NoArgsIsHelpError):
+            typer.echo(f"error: {one_line(exc.format_message())}", err=True)
+        sys.exit(2)
+    except typer.Abort:
+        sys.exit(130)
     except MopeError as exc:  # anything that escaped a command
         typer.echo(f"error: {exc}", err=True)
         sys.exit(2)
+    sys.exit(rv if isinstance(rv, int) else 0)
 
 
 if __name__ == "__main__":

@@ -91,6 +91,21 @@ def test_envelope_target_max_is_joint_over_actions_and_envelope_prefs() -> None:
     assert not torch.allclose(y[0, 0], torch.tensor([1.0 + 1.0, -1.0 + 0.0]))
 
 
+def test_envelope_off_maxes_over_actions_at_the_row_preference_only() -> None:
+    # envelope=False: rows are the envelope set (K = N = 2, the two one-hot preferences); row i uses only k = i.
+    table = torch.tensor([Q0, Q1])
+    stub = StubTarget(table)
+    feats = torch.tensor([[0.0, 7.0], [1.0, 7.0]])
+    rewards = torch.tensor([[1.0, -1.0], [0.0, -1.0]])
+    prefs = ENV_PREFS_T.unsqueeze(0).expand(2, -1, -1)
+    y = envelope_target(stub, feats, rewards, torch.zeros(2), prefs, prefs, 1.0,  # type: ignore[arg-type]
+                        envelope=False)
+    # transition 0: w=(1,0) at k0: [1, 0, .4] -> a0 (1, 0); w=(0,1) at k1: [-1, 0, .6] -> a2 (.6, .6)
+    torch.testing.assert_close(y[0], torch.tensor([[2.0, -1.0], [1.6, -0.4]]))
+    # transition 1: w=(1,0) at k0: [0, 1, .2] -> a1 (1, 1); w=(0,1) at k1: [.5, -2, 0] -> a0 (.5, .5)
+    torch.testing.assert_close(y[1], torch.tensor([[1.0, 0.0], [0.5, -0.5]]))
+
+
 @pytest.mark.parametrize("gamma", [0.5, 0.9, 0.99])
 def test_envelope_target_applies_gamma(gamma: float) -> None:
     y, _ = run_target(gamma=gamma)

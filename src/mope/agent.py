@@ -216,7 +216,7 @@ class MoPE:
     def envelope_set(self, row_prefs: torch.Tensor, acting_prefs: torch.Tensor) -> torch.Tensor:
         """Preferences the envelope max runs over, ``(B, K, m)`` (config ``envelope_prefs``)."""
         mode = self.config.envelope_prefs
-        if mode == "relabel":
+        if mode in ("relabel", "own"):
             return row_prefs
         batch = acting_prefs.unsqueeze(0).expand(acting_prefs.shape[0], -1, -1)
         return batch if mode == "batch" else torch.cat([row_prefs, batch], dim=1)
@@ -242,7 +242,8 @@ class MoPE:
         with torch.no_grad():
             next_feats = self.target_net.encoder(next_obs)
             y = envelope_target(self.target_net, next_feats, rewards, terminated, w, self.envelope_set(w, acting),
-                                c.gamma, select_net=self.q_net if c.double_q else None)
+                                c.gamma, select_net=self.q_net if c.double_q else None,
+                                envelope=c.envelope_prefs != "own")
             if c.clip_targets:
                 y = torch.maximum(torch.minimum(y, self._q_high_t), self._q_low_t)
 

@@ -30,7 +30,7 @@ ALGOS: dict[str, tuple[bool, bool]] = {
     "mope": (True, True),
 }
 
-ENVELOPE_PREFS = ("relabel", "batch", "both")
+ENVELOPE_PREFS = ("relabel", "batch", "both", "own")
 DEVICES = ("cpu", "cuda", "auto")
 
 
@@ -93,7 +93,8 @@ class Config:
     experience_exploration: bool = True
     sigma_omega: float = 0.04
     #: Preference set the envelope max runs over: the transition's own relabeled set ("relabel"),
-    #: the acting preferences of the whole batch ("batch"), or both.
+    #: the acting preferences of the whole batch ("batch"), or both; "own" switches the envelope off (each row maxes
+    #: over actions at its own preference only: an ablation, like morl-baselines' ``envelope=False``).
     envelope_prefs: str = "relabel"
     #: Weight alpha of the mutual-information term in the priority (eq. 7).
     mi_alpha: float = 0.1

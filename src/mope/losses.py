@@ -13,7 +13,7 @@ from mope.networks import QNetwork
 
 def envelope_target(target_net: QNetwork, next_feats: torch.Tensor, rewards: torch.Tensor,
                     terminated: torch.Tensor, row_prefs: torch.Tensor, envelope_prefs: torch.Tensor,
-                    gamma: float, select_net: QNetwork | None = None) -> torch.Tensor:
+                    gamma: float, select_net: QNetwork | None = None, envelope: bool = True) -> torch.Tensor:
     """Envelope target y of eq. 4 (Yang et al. 2019).
 
     For row ``(b, i)`` with preference ``w = row_prefs[b, i]``::
@@ -38,6 +38,8 @@ def envelope_target(target_net: QNetwork, next_feats: torch.Tensor, rewards: tor
         envelope_prefs: ``(B, K, m)`` preferences the max runs over.
         gamma: Discount factor.
         select_net: Optional network for the argmax (double Q-learning).
+        envelope: If False (an ablation, morl-baselines' ``envelope=False``), row ``(b, i)`` maxes over actions
+            at its own preference only; ``envelope_prefs`` must then be ``row_prefs`` (``K = N``).
 
     Returns:
         ``(B, N, m)`` targets.
@@ -48,6 +50,10 @@ def envelope_target(target_net: QNetwork, next_feats: torch.Tensor, rewards: tor
     q_next = target_net.forward_features(feats, flat_prefs).view(b, k, -1, m)  # (B, K, A, m)
     q_sel = q_next if select_net is None else select_net.forward_features(feats, flat_prefs).view(b, k, -1, m)
     a = q_next.shape[2]
+    if not envelope:
+        best_a = torch.einsum("bim,biam->bia", row_prefs, q_sel).argmax(dim=2)  # (B, N)
+        q_star = torch.gather(q_next, 2, best_a.view(b, k, 1, 1).expand(b, k, 1, m)).squeeze(2)
+        return rewards.unsqueeze(1) + gamma * (1.0 - terminated).view(b, 1, 1) * q_star
     scal = torch.einsum("bim,bkam->bika", row_prefs, q_sel).reshape(b, row_prefs.shape[1], k * a)
     best = scal.argmax(dim=2)  # (B, N) index into (K*A)
     q_flat = q_next.reshape(b, k * a, m)

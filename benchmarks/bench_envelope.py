@@ -237,8 +237,8 @@ def flop_per_update(method: str, runner: Any) -> dict[str, float]:
 
     * mope/eql (``MoPE.update``): the online network forward+backward on ``B * N`` rows, the target network
       forward on ``B * K`` rows and, with double Q-learning, the online network again on ``B * K`` rows
-      (``K = N`` with the default ``envelope_prefs="relabel"``); with experience exploration, the discriminator
-      forward+backward on ``B`` rows. Acting adds one row forward per step (negligible).
+      (``K = N`` with the default ``envelope_prefs="relabel"`` and with "own"); with experience exploration, the
+      discriminator forward+backward on ``B`` rows. Acting adds one row forward per step (negligible).
     * Envelope (``Envelope.update``): the batch is repeated ``W = num_sample_w`` times, so the online network
       runs forward+backward on ``B * W`` rows, and ``envelope_target`` repeats those rows ``W`` times again:
       the online and the target network each run forward on ``B * W * W`` rows.
@@ -255,7 +255,7 @@ def flop_per_update(method: str, runner: Any) -> dict[str, float]:
     agent = runner.agent
     c = agent.config
     b, n = c.batch_size, c.n_omega
-    k = {"relabel": n, "batch": b, "both": n + b}[c.envelope_prefs]
+    k = {"batch": b, "both": n + b}.get(c.envelope_prefs, n)  # "relabel" and "own": the rows' own N preferences
     rows_fb = b * n
     rows_f = b * k * (2 if c.double_q else 1)
     flop = 3 * f_q * rows_fb + f_q * rows_f

@@ -117,7 +117,7 @@ class MoPE:
         self.target_net = q_network()
         self.target_net.load_state_dict(self.q_net.state_dict())
         self.target_net.requires_grad_(False)
-        self.optimizer = torch.optim.Adam(self.q_net.parameters(), lr=cfg.learning_rate)
+        self.optimizer = torch.optim.Adam(self.q_net.parameters(), lr=cfg.learning_rate, foreach=True)
 
         self.pref_sampler = PreferenceSampler(self.m, cfg.n_intervals, cfg.preference_exploration,
                                               cfg.pe_count_offset)
@@ -126,7 +126,8 @@ class MoPE:
         if cfg.experience_exploration:
             self.discriminator = Discriminator(spec.obs_space, self.pref_sampler.partition.n_cells,
                                                cfg.disc_hidden, cfg.obs_encoding).to(self.device)
-            self.disc_optimizer = torch.optim.Adam(self.discriminator.parameters(), lr=cfg.disc_learning_rate)
+            self.disc_optimizer = torch.optim.Adam(self.discriminator.parameters(), lr=cfg.disc_learning_rate,
+                                                   foreach=True)
 
         self.q_low, self.q_high = return_bounds(self.env, cfg.gamma)
         self._q_low_t = torch.as_tensor(self.q_low, dtype=torch.float32, device=self.device)

@@ -86,7 +86,7 @@ def mlp(in_dim: int, hidden: Sequence[int], out_dim: int) -> nn.Sequential:
     layers: list[nn.Module] = []
     d = in_dim
     for h in hidden:
-        layers += [nn.Linear(d, h), nn.ReLU()]
+        layers += [nn.Linear(d, h), nn.ReLU(inplace=True)]
         d = h
     layers.append(nn.Linear(d, out_dim))
     return nn.Sequential(*layers)

@@ -223,7 +223,7 @@ def plot_fig6(games: Any, prefs: np.ndarray, half: float, path: Path) -> Path:
                           title=f"w = ({prefs[k, 0]:.2f}, {prefs[k, 1]:.2f})\n{games.outcomes[k]}, "
                                 f"r = ({r[0]:.1f}, {r[1]:.1f})")
     fig.suptitle("MoPE under different preferences (w_catch, w_move); same initial state", fontsize=10)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 0.9))
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path

@@ -132,3 +132,18 @@ def test_usage_errors_are_one_line():
     res = mope_cli("train", "--steps", "abc")
     assert res.returncode == 2
     assert res.stderr.strip().startswith("error:") and len(res.stderr.strip().splitlines()) == 1
+
+
+def test_act_records_a_gif_and_refuses_other_formats(run_dir, tmp_path):
+    gif = tmp_path / "episode.gif"
+    res = mope_cli("act", str(run_dir), "--pref", "0.9,0.1", "--video", str(gif))
+    assert res.returncode == 0, res.stderr
+    assert gif.read_bytes()[:6] in (b"GIF89a", b"GIF87a")
+    assert "frames" in res.stdout and "return:" in res.stdout
+    res = mope_cli("act", str(run_dir), "--pref", "0.9,0.1", "--video", str(tmp_path / "episode.mp4"))
+    assert res.returncode == 2 and "episode.mp4" in res.stderr and "Traceback" not in res.stderr
+
+
+def test_reproduce_confrontation_rejects_a_bad_budget_mode(tmp_path):
+    res = mope_cli("reproduce", "confrontation", "--ppo-budget", "half", "--out", str(tmp_path / "r"))
+    assert res.returncode == 2 and "half" in res.stderr and "Traceback" not in res.stderr

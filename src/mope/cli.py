@@ -164,12 +164,23 @@ def eval_(
 def act(
     checkpoint: Annotated[Path, typer.Argument(help="A run folder or a checkpoint file.")],
     pref: Annotated[str, typer.Option(help="Preference, e.g. 0.3,0.7.")],
+    video: Annotated[Path | None, typer.Option(help="Also record the episode as a GIF (rgb_array envs).")] = None,
+    seed: Annotated[int, typer.Option(help="Seed of the episode's reset (with --video).")] = 0,
     device: Annotated[str | None, typer.Option(help="cpu, cuda or auto (default: the run's).")] = None,
 ) -> None:
-    """Play one greedy episode under a preference and print its return vector."""
-    from mope.experiments import play
+    """Play one greedy episode under a preference and print its return vector (optionally record a GIF)."""
+    from mope.experiments import load_agent, play
+    from mope.preferences import validate_preference
+    from mope.video import record_video
 
     try:
+        if video is not None:
+            agent = load_agent(checkpoint, device)
+            w = validate_preference(pref, agent.m)
+            rec = record_video(agent, agent.config.env_id, w, video, seed=seed,
+                               max_steps=agent.config.max_episode_steps)
+            outcome = f", outcome: {rec['outcome']}" if rec.get("outcome") else ""
+            typer.echo(f"video: {rec['path']} ({rec['frames']} frames{outcome})")
         sols = play(checkpoint, pref, device)
     except MopeError as exc:
         _fail(str(exc))
@@ -209,6 +220,38 @@ def reproduce_dst_cmd(
         return
     typer.echo(res["table"])
     typer.echo(f"figures and table in {res['out']} (training wall time {res['train_wall_s']:.0f} s)")
+
+
+@reproduce_app.command("confrontation")
+def reproduce_confrontation_cmd(
+    out: Annotated[Path, typer.Option(help="Output folder (runs, figures, table).")] = Path(
+        "runs/reproduce-confrontation"),
+    seeds: Annotated[int, typer.Option(help="Seeds per method.")] = 1,
+    steps: Annotated[int, typer.Option(help="Environment steps per agent (and per PPO policy, see --ppo-budget).")
+                     ] = 15_000,
+    ppo_prefs: Annotated[int, typer.Option(help="K preferences, one PPO policy each.")] = 11,
+    eval_prefs: Annotated[int, typer.Option(help="Uniform preferences for EQL and MoPE.")] = 100,
+    episodes: Annotated[int, typer.Option(help="Evaluation episodes per preference.")] = 5,
+    ppo_budget: Annotated[str, typer.Option(help="each: every PPO policy gets --steps; shared: they split it.")
+                          ] = "each",
+    workers: Annotated[int, typer.Option(help="Parallel training processes.")] = 2,
+    set_: Annotated[list[str] | None, typer.Option("--set", help="Config override for EQL/MoPE: KEY=VALUE.")] = None,
+    device: Annotated[str, typer.Option(help="cpu, cuda or auto.")] = "cpu",
+    progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
+) -> None:
+    """Fig. 5 and Fig. 6 of the paper on the robot confrontation game: PPO x K, EQL and MoPE; figures and a table."""
+    from mope.reproduce_confrontation import reproduce_confrontation
+
+    try:
+        res = reproduce_confrontation(out, seeds=seeds, steps=steps, ppo_prefs=ppo_prefs, eval_prefs=eval_prefs,
+                                      episodes=episodes, workers=workers, progress=progress, ppo_budget=ppo_budget,
+                                      device=device, **_parse_sets(set_ or []))
+    except MopeError as exc:
+        _fail(str(exc))
+        return
+    typer.echo(res["table"])
+    typer.echo(f"figures and table in {res['out']} (training {res['train_wall_s']:.0f} s, "
+               f"evaluation {res['eval_wall_s']:.0f} s)")
 
 
 @app.command()
@@ -253,9 +296,12 @@ def report(
 @app.command()
 def envs() -> None:
     """List MO-Gymnasium environments mope's agents can use directly (discrete actions)."""
+    import os
     import warnings
 
     import gymnasium as gym
+
+    os.environ.setdefault("SDL_AUDIODRIVER", "dummy")  # probed pygame envs: no sound card warnings
 
     from mope.envs import make_env
 

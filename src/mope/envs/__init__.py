@@ -28,6 +28,9 @@ KNOWN_REF_POINTS: dict[str, tuple[float, ...]] = {
     "four-room-v0": (-1.0, -1.0, -1.0),
     "minecart-v0": (-1.0, -1.0, -200.0),
     "resource-gathering-v0": (-1.0, -1.0, -2.0),
+    # worst discounted return (gamma 0.99, 150 steps) minus 1: mope.envs.confrontation.reference_point(0.99, 150)
+    "mope/RobotConfrontation-v0": (-34.29, -11.0),
+    "mope/RobotConfrontationDiscrete-v0": (-34.29, -11.0),
 }
 
 
@@ -155,3 +158,6 @@ def default_ref_point(env: gym.Env, env_id: str, gamma: float, horizon: int | No
         return None
     disc = (1 - gamma**horizon) / (1 - gamma) if gamma < 1 else float(horizon)
     return np.minimum(low, 0.0) * disc - 1.0
+
+
+from mope.envs import confrontation  # noqa: E402, F401 - registers mope/RobotConfrontation*-v0

@@ -311,3 +311,42 @@ def test_always_nearest_treasure(evaluator: Evaluator) -> None:
     # the share of preferences for which 0.7 is the best treasure: those with w_time / w_treasure > ~3.8
     share = float(np.mean(Oracle(evaluator.env).targets(evaluator.prefs) == 0))
     assert res["optimal_share"] == pytest.approx(share)
+
+
+class _Recorder:
+    """A fixed-action policy that records the observations it is shown."""
+
+    def __init__(self, action: int) -> None:
+        self.action = action
+        self.seen: list[np.ndarray] = []
+
+    def greedy_actions(self, obs: np.ndarray, prefs: np.ndarray) -> np.ndarray:
+        self.seen.append(np.asarray(obs).copy())
+        return np.full(len(obs), self.action)
+
+
+def test_rollouts_keep_observation_wrappers():
+    import gymnasium as gym
+
+    env = gym.wrappers.TransformObservation(make_env("deep-sea-treasure-v0"), lambda o: o * 10.0 + 5.0,
+                                            make_env("deep-sea-treasure-v0").observation_space)
+    assert not DeepSeaTreasureBatch.supports(env) and DeepSeaTreasureBatch.supports(make_env("deep-sea-treasure-v0"))
+    policy = _Recorder(action=1)  # down: treasure 0.7 after one step
+    sols = solutions(policy, env, np.array([[0.5, 0.5]]), gamma=0.99, max_steps=5)
+    assert np.all(policy.seen[0] >= 5.0), "the policy must see the wrapped observation"
+    np.testing.assert_allclose(sols.returns[0], [0.7, -1.0])
+
+
+def test_rollouts_keep_action_wrappers_of_continuous_envs():
+    from mope.envs import DiscreteActions
+
+    env = DiscreteActions(_continuous_env(), bins=3)
+    sols = solutions(_Recorder(action=2), env, np.array([[0.5, 0.5], [0.2, 0.8]]), gamma=0.99, max_steps=20)
+    assert sols.returns.shape == (2, env.unwrapped.reward_space.shape[0])
+    assert np.all(np.isfinite(sols.returns)) and np.all(sols.lengths == 20)
+
+
+def _continuous_env():
+    import mo_gymnasium as mo_gym
+
+    return mo_gym.make("mo-mountaincarcontinuous-v0")

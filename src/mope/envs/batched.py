@@ -34,8 +34,9 @@ class EnvList:
     def __init__(self, env: gym.Env, n: int, seed: int = 0) -> None:
         self.n = n
         self.seed = seed
-        base = env.unwrapped
-        self.envs = [copy.deepcopy(base) for _ in range(n)]
+        # the whole wrapper chain is copied: action, observation and reward wrappers are part of the task the
+        # agent was trained on; a time-limit wrapper only flags truncation, which is ignored here
+        self.envs = [copy.deepcopy(env) for _ in range(n)]
 
     def reset(self) -> np.ndarray:
         return np.stack([e.reset(seed=self.seed + i)[0] for i, e in enumerate(self.envs)])
@@ -46,6 +47,10 @@ class EnvList:
         rew = np.stack([np.asarray(o[1], dtype=np.float64) for o in out])
         term = np.array([bool(o[2]) for o in out])
         return obs, rew, term
+
+
+#: Wrappers that neither change observations, actions nor rewards (the vectorised DST may stand in for them).
+BENIGN_WRAPPERS = frozenset({"TimeLimit", "OrderEnforcing", "PassiveEnvChecker", "EnvCompatibility"})
 
 
 class DeepSeaTreasureBatch:
@@ -64,8 +69,15 @@ class DeepSeaTreasureBatch:
 
     @staticmethod
     def supports(env: gym.Env) -> bool:
-        """True for MO-Gymnasium's Deep-Sea-Treasure."""
-        return type(env.unwrapped).__name__ == "DeepSeaTreasure" and hasattr(env.unwrapped, "sea_map")
+        """True for MO-Gymnasium's Deep-Sea-Treasure with no wrapper that changes what the agent sees or does."""
+        if type(env.unwrapped).__name__ != "DeepSeaTreasure" or not hasattr(env.unwrapped, "sea_map"):
+            return False
+        layer = env
+        while isinstance(layer, gym.Wrapper):
+            if type(layer).__name__ not in BENIGN_WRAPPERS:
+                return False
+            layer = layer.env
+        return True
 
     def _obs(self, pos: np.ndarray) -> np.ndarray:
         return pos.astype(np.float32) * 0.1 if self.float_state else pos.astype(np.int32)

@@ -164,8 +164,8 @@ def train_run(config: Config, out_dir: str | Path, progress: bool = True, overwr
                           torch_threads=config.torch_threads)
         kept = [r for r in read_metrics(out) if r["step"] <= agent.global_step] if (out / "metrics.csv").is_file() \
             else []
-    else:
-        out = prepare_out_dir(out_dir, overwrite)
+    else:  # with resume, a folder that has nothing to resume from (killed before its first checkpoint) restarts
+        out = prepare_out_dir(out_dir, overwrite or resume)
         config.save(out / "config.json")
         agent = MoPE(config.env_id, config)
         kept = []
@@ -225,6 +225,12 @@ def train_run(config: Config, out_dir: str | Path, progress: bool = True, overwr
                "versions": _environment_info()}
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return RunResult(out, agent, all_records, final, agent.wall_s)
+
+
+def run_worker(config_dict: dict[str, Any], out_dir: str) -> str:
+    """Process-pool worker of the reproductions: train one run to the end, resuming or reusing what is there."""
+    train_run(Config.from_dict(config_dict), out_dir, progress=False, resume=True)
+    return out_dir
 
 
 def _csv_value(key: str, value: float) -> float | int:

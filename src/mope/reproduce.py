@@ -25,19 +25,11 @@ import numpy as np
 
 from mope.config import ALGOS, Config
 from mope.errors import ConfigError
+from mope.experiments import run_worker
 
 DST = "deep-sea-treasure-v0"
 
 
-def _run_one(config_dict: dict[str, Any], out_dir: str) -> str:
-    """Worker: train one (variant, seed) unless its folder already holds a finished run."""
-    from mope.experiments import train_run
-
-    out = Path(out_dir)
-    if (out / "summary.json").is_file() and (out / "checkpoints" / "final.pt").is_file():
-        return out_dir
-    train_run(Config.from_dict(config_dict), out, progress=False, overwrite=True)
-    return out_dir
 
 
 def run_trials(configs: dict[str, Config], out: Path, workers: int, progress: bool = True) -> None:
@@ -45,7 +37,7 @@ def run_trials(configs: dict[str, Config], out: Path, workers: int, progress: bo
     from tqdm.auto import tqdm
 
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = {pool.submit(_run_one, cfg.to_dict(), str(out / name)): name for name, cfg in configs.items()}
+        futures = {pool.submit(run_worker, cfg.to_dict(), str(out / name)): name for name, cfg in configs.items()}
         with tqdm(total=len(futures), desc="trials", disable=not progress, unit="run") as bar:
             for fut in as_completed(futures):
                 fut.result()

@@ -39,6 +39,7 @@ import numpy as np
 import mope.envs.confrontation as conf
 from mope.config import Config
 from mope.errors import ConfigError
+from mope.experiments import run_worker
 
 METHODS = ("ppo", "eql", "mope")
 EVAL_SEED = 10_000
@@ -50,16 +51,6 @@ MARKERS = {"ppo": "s", "eql": "^", "mope": "o"}
 # ------------------------------------------------------------------------------------------------------------
 # training (process-pool workers)
 # ------------------------------------------------------------------------------------------------------------
-def _train_agent(config_dict: dict[str, Any], out_dir: str) -> str:
-    """Worker: train one EQL/MoPE run unless its folder already holds a finished run."""
-    import mope.envs.confrontation  # noqa: F401 - registers the ids in a fresh worker
-    from mope.experiments import train_run
-
-    out = Path(out_dir)
-    if (out / "summary.json").is_file() and (out / "checkpoints" / "final.pt").is_file():
-        return out_dir
-    train_run(Config.from_dict(config_dict), out, progress=False, overwrite=True)
-    return out_dir
 
 
 def _train_ppo(pref: list[float], steps: int, seed: int, path: str, device: str) -> str:
@@ -279,7 +270,7 @@ def reproduce_confrontation(out: str | Path, seeds: int = 1, steps: int = 15_000
 
     t0 = time.perf_counter()
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = {pool.submit(_train_agent, cfg.to_dict(), str(out / name)): name for name, cfg in configs.items()}
+        futures = {pool.submit(run_worker, cfg.to_dict(), str(out / name)): name for name, cfg in configs.items()}
         for s in range(seeds):
             for k, p in enumerate(ppo_paths[s]):
                 futures[pool.submit(_train_ppo, ppo_w[k].tolist(), ppo_steps, 1000 * s + k, str(p), device)] = \

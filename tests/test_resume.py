@@ -139,3 +139,29 @@ def test_resume_cli_errors(tmp_path):
     res = subprocess.run([sys.executable, "-m", "mope.cli", "train", "--resume", str(tmp_path), "--steps", "5"],
                          capture_output=True, text=True)
     assert res.returncode == 2 and "drop --steps" in res.stderr
+
+
+def test_divergence_names_step_and_quantity_and_keeps_the_last_good_checkpoint(tmp_path, monkeypatch):
+    import torch
+
+    import mope.agent as agent_module
+
+    cfg = Config.for_algo("eql", **{**SMALL, "total_steps": 400, "checkpoint_every": 100})
+    original = agent_module.MoPE.update
+
+    def poisoned(self):
+        if self.global_step == 250:  # after the step-200 checkpoint, a weight turns NaN
+            with torch.no_grad():
+                self.q_net.net[0].weight.fill_(float("nan"))
+        return original(self)
+
+    monkeypatch.setattr(agent_module.MoPE, "update", poisoned)
+    out = tmp_path / "run"
+    with pytest.raises(agent_module.TrainingDivergedError) as err:
+        train_run(cfg, out, progress=False)
+    msg = str(err.value)
+    assert "step 250" in msg and "Q-value is nan" in msg and "resume.pt" in msg
+    good = MoPE.load(out / "checkpoints" / "resume.pt")
+    assert good.global_step == 200
+    assert all(torch.isfinite(p).all() for p in good.q_net.parameters())
+    assert run_status(out) == "resumable" and not (out / "summary.json").exists()

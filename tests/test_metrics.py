@@ -19,6 +19,7 @@ from mope.metrics import (
     evaluate_front,
     expected_utility,
     hypervolume,
+    inverted_generational_distance,
     match_matrix,
     optimal_share,
     optimal_utility,
@@ -287,6 +288,7 @@ def test_evaluate_front_schema_without_true_front() -> None:
         "eum_optimal",
         "eum_gap",
         "optimal_share",
+        "igd",
     }
     assert out["eum"] == 1.0
     assert out["cardinality"] == 2.0
@@ -382,3 +384,25 @@ def test_errors_bad_prefs_and_shapes() -> None:
 
 # Property-based tests of these metrics (CR range, CR = 1 iff found = CCS, HV monotone, CCS subset of the
 # front) live in tests/test_properties.py.
+
+
+def test_igd_hand_values():
+    front = np.array([[0.0, 4.0], [3.0, 0.0]])
+    # every front point found: 0
+    assert inverted_generational_distance(front, front) == pytest.approx(0.0)
+    # one found point at (0, 0): distances 4 and 3 -> mean 3.5
+    assert inverted_generational_distance([[0.0, 0.0]], front) == pytest.approx(3.5)
+    # (0, 4) found, (3, 0) missing: nearest to (3, 0) is (0, 4) at distance 5 -> mean 2.5
+    assert inverted_generational_distance([[0.0, 4.0]], front) == pytest.approx(2.5)
+    with pytest.raises(ValueError):
+        inverted_generational_distance(np.zeros((0, 2)), front)
+
+
+def test_evaluate_front_reports_igd_against_the_pareto_front():
+    front = np.array([[0.0, 4.0], [3.0, 0.0], [1.0, 1.0]])  # (1, 1) is Pareto optimal but not in the CCS
+    prefs = np.array([[1.0, 0.0], [0.0, 1.0]])
+    res = evaluate_front([[3.0, 0.0], [0.0, 4.0]], prefs, true_front=front)
+    assert res["cr"] == pytest.approx(1.0)
+    # (1, 1) is missed: its nearest found point is (3, 0) at sqrt(5), so IGD = sqrt(5) / 3
+    assert res["igd"] == pytest.approx(np.sqrt(5) / 3)
+    assert np.isnan(evaluate_front([[3.0, 0.0]], prefs[:1])["igd"])

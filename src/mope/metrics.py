@@ -45,6 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 from pymoo.indicators.hv import HV
+from pymoo.indicators.igd import IGD
 from scipy.optimize import linprog
 
 from mope.errors import MopeError, PreferenceError
@@ -60,6 +61,7 @@ __all__ = [
     "evaluate_front",
     "expected_utility",
     "hypervolume",
+    "inverted_generational_distance",
     "match_matrix",
     "optimal_share",
     "optimal_utility",
@@ -81,6 +83,7 @@ EVALUATE_KEYS: tuple[str, ...] = (
     "eum_optimal",
     "eum_gap",
     "optimal_share",
+    "igd",
 )
 
 # Tolerance on the row sums of preference vectors (same as mope.preferences.PREF_SUM_ATOL).
@@ -371,6 +374,20 @@ def hypervolume(points: ArrayLike, ref_point: ArrayLike) -> float:
     return float(HV(ref_point=-ref)(-x))
 
 
+def inverted_generational_distance(points: ArrayLike, front: ArrayLike) -> float:
+    """IGD: the mean, over the points of ``front``, of the Euclidean distance to the nearest of ``points``.
+
+    The distance of a found set to a known front (0 when every front point is found; pymoo's ``IGD``).
+
+    Args:
+        points: Found returns, shape ``(n, m)``, ``n >= 1``.
+        front: The true (Pareto) front, shape ``(k, m)``, ``k >= 1``.
+    """
+    f = _as_points(front, "front", allow_empty=False)
+    x = _as_points(points, "points", n_cols=f.shape[1], allow_empty=False)
+    return float(IGD(f)(x))
+
+
 def expected_utility(returns: ArrayLike, prefs: ArrayLike) -> float:
     """Expected utility metric (EUM): mean of ``prefs[i] · returns[i]``.
 
@@ -463,7 +480,7 @@ def evaluate_front(
     Returns:
         A dict with exactly the keys of :data:`EVALUATE_KEYS`: ``eum``, ``cardinality``, ``hv`` (nan without
         ``ref_point``) and ``cr``, ``precision``, ``recall`` (against ``convex_coverage_set(true_front)``),
-        ``eum_optimal``, ``eum_gap`` (``eum_optimal - eum``) and ``optimal_share`` (all nan without
+        ``eum_optimal``, ``eum_gap`` (``eum_optimal - eum``), ``optimal_share`` and ``igd`` (all nan without
         ``true_front``).
     """
     _check_tolerances(atol, rtol)
@@ -484,4 +501,5 @@ def evaluate_front(
         out["eum_optimal"] = float(np.mean(optimal_utility(p, f)))
         out["eum_gap"] = out["eum_optimal"] - out["eum"]
         out["optimal_share"] = optimal_share(r, p, f, atol, rtol)
+        out["igd"] = inverted_generational_distance(unique_solutions(r, atol, rtol), pareto_front(f))
     return out

@@ -108,7 +108,7 @@ def test_env_without_front_reports_hv_and_eum_only(tmp_path: Path) -> None:
     assert res.metrics == ["hv", "eum", "timeout_share"]
     assert res.table.splitlines()[0] == "| group | seeds | steps | HV | EUM | time-outs |"
     assert res.groups[0].stats["hv"].mean == 10.5 and res.groups[0].stats["hv"].std == pytest.approx(math.sqrt(0.5))
-    assert any("cr, optimal_share" in n for n in res.notes)
+    assert any("cr, igd, optimal_share" in n for n in res.notes)
     assert "IQM" not in res.table  # fewer than 4 seeds: the IQM equals the mean and is not shown
 
 

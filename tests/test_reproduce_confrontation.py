@@ -116,3 +116,18 @@ def test_reproduce_confrontation_tiny(tmp_path) -> None:
     again = reproduce_confrontation(tmp_path, steps=250, ppo_prefs=2, eval_prefs=3, episodes=2, workers=1,
                                     progress=False, n_omega=4, learning_starts=100)
     assert again["train_wall_s"] < r["train_wall_s"]
+
+
+def test_a_saved_ppo_policy_of_another_budget_is_not_reused(tmp_path):
+    import json
+
+    from mope.errors import ConfigError
+    from mope.reproduce_confrontation import _train_ppo
+
+    path = tmp_path / "ppo" / "pref_00.zip"
+    path.parent.mkdir(parents=True)
+    path.write_bytes(b"not trained here")
+    path.with_suffix(".json").write_text(json.dumps({"pref": [1.0, 0.0], "steps": 64, "seed": 0}))
+    assert _train_ppo([1.0, 0.0], 64, 0, str(path), "cpu") == str(path)  # same budget: reused, not retrained
+    with pytest.raises(ConfigError, match="steps"):
+        _train_ppo([1.0, 0.0], 128, 0, str(path), "cpu")

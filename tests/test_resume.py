@@ -139,6 +139,9 @@ def test_resume_cli_errors(tmp_path):
     res = subprocess.run([sys.executable, "-m", "mope.cli", "train", "--resume", str(tmp_path), "--steps", "5"],
                          capture_output=True, text=True)
     assert res.returncode == 2 and "drop --steps" in res.stderr
+    res = subprocess.run([sys.executable, "-m", "mope.cli", "train", "--resume", str(tmp_path), "--n-omega", "3",
+                          "--algo", "eql"], capture_output=True, text=True)
+    assert res.returncode == 2 and "drop --algo, --n-omega" in res.stderr
 
 
 def test_divergence_names_step_and_quantity_and_keeps_the_last_good_checkpoint(tmp_path, monkeypatch):
@@ -165,3 +168,34 @@ def test_divergence_names_step_and_quantity_and_keeps_the_last_good_checkpoint(t
     assert good.global_step == 200
     assert all(torch.isfinite(p).all() for p in good.q_net.parameters())
     assert run_status(out) == "resumable" and not (out / "summary.json").exists()
+
+
+def test_overwrite_leaves_nothing_of_the_old_run_and_stale_resume_state_is_refused(tmp_path):
+    from mope.experiments import prepare_out_dir
+
+    cfg = Config.for_algo("eql", **SMALL)
+    out = tmp_path / "run"
+    train_run(cfg, out, progress=False)
+    prepare_out_dir(out, overwrite=True)
+    left = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
+    assert left == [], left
+    assert run_status(out) == "new"
+    # a resume.pt written by another config is refused, not silently continued
+    train_run(cfg, out, progress=False)
+    (out / "summary.json").unlink()
+    other = cfg.replace(learning_rate=5e-4)
+    other.save(out / "config.json")
+    with pytest.raises(RunFolderError, match="learning_rate"):
+        train_run(other, out, progress=False, resume=True)
+
+
+def test_resume_at_the_last_step_still_writes_the_final_solutions(tmp_path):
+    cfg = Config.for_algo("eql", **SMALL)
+    out = tmp_path / "run"
+    ref = train_run(cfg, out, progress=False)
+    solutions_ref = (out / "solutions.csv").read_text()
+    for name in ("summary.json", "solutions.csv", "checkpoints/final.pt"):
+        (out / name).unlink()
+    res = train_run(cfg, out, progress=False, resume=True)
+    assert (out / "solutions.csv").read_text() == solutions_ref
+    assert res.final["step"] == 300 and isinstance(res.final["step"], int) and res.final["cr"] == ref.final["cr"]

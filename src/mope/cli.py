@@ -50,8 +50,9 @@ def _parse_sets(items: list[str]) -> dict[str, Any]:
 
 @app.command()
 def train(
-    env: Annotated[str, typer.Option(help="Environment id (MO-Gymnasium).")] = "deep-sea-treasure-v0",
-    algo: Annotated[str, typer.Option(help=f"Variant: {', '.join(ALGOS)}.")] = "mope",
+    env: Annotated[str | None, typer.Option(help="Environment id (MO-Gymnasium) [default: deep-sea-treasure-v0].")
+                   ] = None,
+    algo: Annotated[str | None, typer.Option(help=f"Variant: {', '.join(ALGOS)} [default: mope].")] = None,
     steps: Annotated[int | None, typer.Option(help="Environment steps.")] = None,
     seed: Annotated[int | None, typer.Option(help="Random seed.")] = None,
     out: Annotated[Path | None, typer.Option(help="Run folder (default runs/<env>-<algo>-s<seed>).")] = None,
@@ -76,9 +77,12 @@ def train(
     run_dir = resume
     try:
         if resume is not None:
-            given = [name for name, v in (("--steps", steps), ("--seed", seed), ("--out", out), ("--config", config),
-                                          ("--set", set_), ("--eval-every", eval_every), ("--hidden", hidden))
-                     if v]
+            flags_given = (("--env", env), ("--algo", algo), ("--steps", steps), ("--seed", seed), ("--out", out),
+                           ("--config", config), ("--set", set_), ("--eval-every", eval_every),
+                           ("--eval-prefs", eval_prefs), ("--n-omega", n_omega), ("--sigma-omega", sigma_omega),
+                           ("--mi-alpha", mi_alpha), ("--n-intervals", n_intervals), ("--hidden", hidden),
+                           ("--overwrite", overwrite))
+            given = [name for name, v in flags_given if v is not None and v is not False and v != []]
             if given:
                 raise ConfigError(f"--resume continues a run with its saved config; drop {', '.join(given)}")
             if not (resume / "config.json").is_file():
@@ -92,7 +96,9 @@ def train(
             _print_final(cfg, result)
             return
         base: dict[str, Any] = Config.load(config).to_dict() if config else {}
-        base.pop("algo", None)
+        base_algo = base.pop("algo", None)  # a config file's variant and env hold unless --algo / --env are given
+        env = env or base.get("env_id") or "deep-sea-treasure-v0"
+        algo = algo or base_algo or "mope"
         if algo not in ALGOS:
             raise ConfigError(f"unknown algorithm '{algo}'{suggest(algo, ALGOS)}; choose one of {', '.join(ALGOS)}")
         flags = {"env_id": env, "total_steps": steps, "seed": seed, "eval_every": eval_every,
@@ -165,7 +171,7 @@ def act(
     checkpoint: Annotated[Path, typer.Argument(help="A run folder or a checkpoint file.")],
     pref: Annotated[str, typer.Option(help="Preference, e.g. 0.3,0.7.")],
     video: Annotated[Path | None, typer.Option(help="Also record the episode as a GIF (rgb_array envs).")] = None,
-    seed: Annotated[int, typer.Option(help="Seed of the episode's reset (with --video).")] = 0,
+    seed: Annotated[int, typer.Option(help="Seed of the episode's reset.")] = 0,
     device: Annotated[str | None, typer.Option(help="cpu, cuda or auto (default: the run's).")] = None,
 ) -> None:
     """Play one greedy episode under a preference and print its return vector (optionally record a GIF)."""
@@ -181,7 +187,7 @@ def act(
                                max_steps=agent.config.max_episode_steps)
             outcome = f", outcome: {rec['outcome']}" if rec.get("outcome") else ""
             typer.echo(f"video: {rec['path']} ({rec['frames']} frames{outcome})")
-        sols = play(checkpoint, pref, device)
+        sols = play(checkpoint, pref, device, seed)
     except MopeError as exc:
         _fail(str(exc))
         return

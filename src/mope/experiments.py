@@ -22,6 +22,7 @@ import csv
 import json
 import os
 import platform
+import shutil
 import signal
 import threading
 from dataclasses import dataclass
@@ -81,6 +82,12 @@ def prepare_out_dir(out_dir: str | Path, overwrite: bool = False) -> Path:
         raise RunFolderError(
             f"output folder '{out}' already holds a run; choose another --out, pass --overwrite{hint}")
     try:
+        if overwrite:  # nothing of the old run may pass for the new one's (status, report, resume)
+            for name in ("summary.json", "solutions.csv", "metrics.csv", "config.json", "error.txt"):
+                (out / name).unlink(missing_ok=True)
+            for old in (out / "checkpoints").glob("*.pt"):
+                old.unlink()
+            shutil.rmtree(out / "tb", ignore_errors=True)
         (out / "checkpoints").mkdir(parents=True, exist_ok=True)
         probe = out / ".write_test"
         probe.write_text("ok")
@@ -104,12 +111,12 @@ def write_solutions(path: str | Path, sols: Solutions) -> None:
 
 
 def read_metrics(run_dir: str | Path) -> list[dict[str, float]]:
-    """Rows of a run's ``metrics.csv`` as floats."""
+    """Rows of a run's ``metrics.csv`` as floats (``step`` as an int)."""
     path = Path(run_dir) / "metrics.csv"
     if not path.is_file():
         raise RunFolderError(f"'{run_dir}' has no metrics.csv; is it a mope run folder?")
     with open(path) as f:
-        return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(f)]
+        return [{k: int(float(v)) if k == "step" else float(v) for k, v in row.items()} for row in csv.DictReader(f)]
 
 
 def _environment_info() -> dict[str, Any]:
@@ -162,6 +169,10 @@ def train_run(config: Config, out_dir: str | Path, progress: bool = True, overwr
     if status == "resumable":
         agent = MoPE.load(out / "checkpoints" / RESUME_CHECKPOINT, device=config.device,
                           torch_threads=config.torch_threads)
+        stale = _same_run(agent.config, config)
+        if stale:
+            raise RunFolderError(f"cannot resume '{out}': checkpoints/{RESUME_CHECKPOINT} was written by another "
+                                 f"config (it differs in {', '.join(stale)}); pass --overwrite to start again")
         kept = [r for r in read_metrics(out) if r["step"] <= agent.global_step] if (out / "metrics.csv").is_file() \
             else []
     else:  # with resume, a folder that has nothing to resume from (killed before its first checkpoint) restarts
@@ -175,7 +186,7 @@ def train_run(config: Config, out_dir: str | Path, progress: bool = True, overwr
     csv_writer = csv.DictWriter(metrics_file, fieldnames=METRIC_COLUMNS, extrasaction="ignore")
     csv_writer.writeheader()
     for row in kept:
-        csv_writer.writerow({k: _csv_value(k, row.get(k, float("nan"))) for k in METRIC_COLUMNS})
+        csv_writer.writerow({k: row.get(k, float("nan")) for k in METRIC_COLUMNS})
     metrics_file.flush()
 
     def on_eval(ag: MoPE, rec: dict[str, float]) -> None:
@@ -201,8 +212,14 @@ def train_run(config: Config, out_dir: str | Path, progress: bool = True, overwr
             handlers[sig] = signal.signal(sig, lambda signum, frame: received.append(signum))
     remaining = config.total_steps - agent.global_step
     try:
-        records = agent.train(remaining, eval_env=eval_env, callback=on_eval, progress=progress,
-                              stop=lambda: bool(received), on_step=on_step) if remaining > 0 else []
+        if remaining > 0:
+            records = agent.train(remaining, eval_env=eval_env, callback=on_eval, progress=progress,
+                                  stop=lambda: bool(received), on_step=on_step)
+        else:  # resumed at the last step: evaluate once more for the final solutions (deterministic)
+            records = []
+            c = config
+            _, agent.last_solutions = Evaluator(eval_env, c.env_id, c.gamma, c.eval_prefs, c.seed,
+                                                c.max_episode_steps, c.ref_point).evaluate(agent)
     except TrainingDivergedError as exc:
         last = out / "checkpoints" / RESUME_CHECKPOINT
         where = f"the last good checkpoint is '{last}'" if last.is_file() else "no checkpoint was written before it"
@@ -212,6 +229,7 @@ def train_run(config: Config, out_dir: str | Path, progress: bool = True, overwr
             signal.signal(sig, old_handler)
         metrics_file.close()
         writer.close()
+        eval_env.close()
     if received:
         agent.save(out / "checkpoints" / RESUME_CHECKPOINT, include_buffer=True)
         raise KeyboardInterrupt(f"stopped by signal {received[0]} at step {agent.global_step}")
@@ -231,10 +249,6 @@ def run_worker(config_dict: dict[str, Any], out_dir: str) -> str:
     """Process-pool worker of the reproductions: train one run to the end, resuming or reusing what is there."""
     train_run(Config.from_dict(config_dict), out_dir, progress=False, resume=True)
     return out_dir
-
-
-def _csv_value(key: str, value: float) -> float | int:
-    return int(value) if key == "step" else value
 
 
 def resolve_checkpoint(path: str | Path) -> Path:
@@ -274,8 +288,8 @@ def evaluate_checkpoint(path: str | Path, n_prefs: int = 2000, seed: int | None 
     return res, sols
 
 
-def play(path: str | Path, pref: Any, device: str | None = None) -> Solutions:
-    """Play one greedy episode of a checkpoint under ``pref``; return its :class:`Solutions` (one row)."""
+def play(path: str | Path, pref: Any, device: str | None = None, seed: int = 0) -> Solutions:
+    """Play one greedy episode of a checkpoint under ``pref`` from reset seed ``seed``; one-row :class:`Solutions`."""
     agent = load_agent(path, device)
     w = validate_preference(pref, agent.m)
-    return solutions(agent, agent.env, w[None], agent.config.gamma, agent.config.max_episode_steps)
+    return solutions(agent, agent.env, w[None], agent.config.gamma, agent.config.max_episode_steps, seed=seed)

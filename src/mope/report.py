@@ -442,7 +442,8 @@ def report(runs_dir: str | Path, out_dir: str | Path | None = None, metrics: Seq
     shown = [m for m in metrics if any(g.stats[m].n for g in groups)]
     dropped = [m for m in metrics if m not in shown]
     if dropped:
-        notes.append(f"left out {', '.join(dropped)}: NaN or missing in every run (no known Pareto front, or runs older than the metric)")
+        notes.append(f"left out {', '.join(dropped)}: NaN or missing in every run "
+                     "(no known Pareto front, or runs older than the metric)")
     if not shown:
         raise ReportError(f"every metric of {', '.join(metrics)} is NaN in every run")
     steps = {int(r.final.get("step", 0)) for r in runs}

@@ -60,15 +60,19 @@ def _train_ppo(pref: list[float], steps: int, seed: int, path: str, device: str)
     from mope.baselines import train_ppo
 
     p = Path(path)
-    if p.is_file():
-        return path
+    meta_path, meta = p.with_suffix(".json"), {"pref": pref, "steps": steps, "seed": seed}
+    if p.is_file() and meta_path.is_file():
+        saved = json.loads(meta_path.read_text())
+        if saved == meta:
+            return path
+        raise ConfigError(f"'{p}' holds a PPO policy trained with {saved}, not {meta}; use another --out")
     torch.set_num_threads(1)
     p.parent.mkdir(parents=True, exist_ok=True)
     model = train_ppo(pref, steps, seed, device=device)
     tmp = p.with_name(p.stem + ".partial.zip")
     model.save(tmp)
+    meta_path.write_text(json.dumps(meta))  # the metadata first: the .zip under its name marks the policy done
     tmp.rename(p)
-    (p.with_suffix(".json")).write_text(json.dumps({"pref": pref, "steps": steps, "seed": seed}))
     return path
 
 
@@ -284,7 +288,7 @@ def reproduce_confrontation(out: str | Path, seeds: int = 1, steps: int = 15_000
 
     t1 = time.perf_counter()
     probe = conf.RobotConfrontationEnv()
-    ref = conf.reference_point(1.0, conf.DEFAULT_HORIZON)
+    ref = conf.reference_point(1.0, max(overrides.get("max_episode_steps") or 0, conf.DEFAULT_HORIZON))
     eval_w = equally_spaced(2, eval_prefs)
     fig6_w = np.asarray(FIG6_PREFS)
     per_seed: dict[str, list[dict[str, Any]]] = {m: [] for m in METHODS}

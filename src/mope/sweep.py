@@ -34,6 +34,7 @@ import time
 import traceback
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -414,7 +415,11 @@ def _local_backend(jobs: list[tuple[str, dict[str, Any], str]], workers: int,
         while pending:
             finished, pending = wait(pending, timeout=1.0, return_when=FIRST_COMPLETED)
             for fut in finished:
-                on_done(fut.result())
+                try:
+                    on_done(fut.result())
+                except BrokenProcessPool as exc:  # a worker was killed (OOM killer, signal): not a trial error
+                    raise SweepError(f"a trial process died ({exc}); run the sweep again to resume "
+                                     "the unfinished trials") from None
             on_running(min(workers, sum(f.running() for f in pending)))
     except BaseException:
         pool.shutdown(wait=False, cancel_futures=True)

@@ -78,17 +78,19 @@ def record_video(policy: Any, env_id: str, pref: Any, path: str | Path, seed: in
     w = validate_preference(pref, m) if pref is not None else None
     act = _action_fn(policy, w)
     limit = max_steps or (env.spec.max_episode_steps if env.spec else None) or 1000
-    obs, info = env.reset(seed=seed)
-    frames = [_frame(env, env_id)]
-    total = np.zeros(m)
-    for _ in range(limit):
-        obs, r, term, trunc, info = env.step(act(obs))
-        total += np.asarray(r, dtype=np.float64)
-        frames.append(_frame(env, env_id))
-        if term or trunc:
-            break
-    rate = fps or env.metadata.get("render_fps") or 10
-    env.close()
+    try:
+        obs, info = env.reset(seed=seed)
+        frames = [_frame(env, env_id)]
+        total = np.zeros(m)
+        for _ in range(limit):
+            obs, r, term, trunc, info = env.step(act(obs))
+            total += np.asarray(r, dtype=np.float64)
+            frames.append(_frame(env, env_id))
+            if term or trunc:
+                break
+        rate = fps or env.metadata.get("render_fps") or 10
+    finally:
+        env.close()
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
         iio.imwrite(out, np.stack(frames), duration=1000.0 / rate, loop=0)

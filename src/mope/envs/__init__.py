@@ -28,9 +28,6 @@ KNOWN_REF_POINTS: dict[str, tuple[float, ...]] = {
     "four-room-v0": (-1.0, -1.0, -1.0),
     "minecart-v0": (-1.0, -1.0, -200.0),
     "resource-gathering-v0": (-1.0, -1.0, -2.0),
-    # worst discounted return (gamma 0.99, 150 steps) minus 1: mope.envs.confrontation.reference_point(0.99, 150)
-    "mope/RobotConfrontation-v0": (-34.29, -11.0),
-    "mope/RobotConfrontationDiscrete-v0": (-34.29, -11.0),
 }
 
 
@@ -145,7 +142,8 @@ def known_front(env: gym.Env, gamma: float) -> np.ndarray | None:
 
 
 def default_ref_point(env: gym.Env, env_id: str, gamma: float, horizon: int | None) -> np.ndarray | None:
-    """Hypervolume reference point: the literature's value for known envs, else derived from reward bounds.
+    """Hypervolume reference point: the literature's value for known envs, the env's own
+    ``hv_reference_point(gamma, horizon)`` if it has one, else derived from reward bounds.
 
     For an unknown env with a finite ``reward_space.low``, the reference point is the worst discounted return
     ``low * sum_{t < H} gamma^t`` over the horizon ``H`` minus 1, which every achievable return dominates.
@@ -153,6 +151,9 @@ def default_ref_point(env: gym.Env, env_id: str, gamma: float, horizon: int | No
     """
     if env_id in KNOWN_REF_POINTS:
         return np.asarray(KNOWN_REF_POINTS[env_id], dtype=np.float64)
+    own = getattr(env.unwrapped, "hv_reference_point", None)
+    if callable(own):  # an environment that knows its worst return (mope's confrontation game)
+        return np.asarray(own(gamma, horizon), dtype=np.float64)
     low = np.asarray(env.unwrapped.reward_space.low, dtype=np.float64)
     if horizon is None or not np.all(np.isfinite(low)):
         return None

@@ -401,6 +401,14 @@ class RobotConfrontationEnv(gym.Env):
         return red_won, blue_won, bool(out_of_arena(self.red, self.half)), bool(out_of_arena(self.blue, self.half))
 
     # -- rendering ---------------------------------------------------------------------------------------
+    def hv_reference_point(self, gamma: float, horizon: int | None = None) -> np.ndarray:
+        """Hypervolume reference point for returns discounted by ``gamma`` over ``horizon`` steps.
+
+        :func:`mope.envs.default_ref_point` asks the environment for it: the worst return minus 1
+        (:func:`reference_point`), so it follows the discount and episode length actually used.
+        """
+        return reference_point(gamma, horizon or DEFAULT_HORIZON)
+
     def render(self) -> np.ndarray | None:
         """An ``(H, W, 3)`` uint8 frame of the arena and both trajectories (``render_mode="rgb_array"``)."""
         if self.render_mode != "rgb_array":
@@ -513,8 +521,8 @@ class RobotConfrontationDiscreteEnv(RobotConfrontationEnv):
     """The game with :class:`DiscreteConfrontation`'s action grid built in (``mope/RobotConfrontationDiscrete-v0``).
 
     Same dynamics, rules and rewards as :class:`RobotConfrontationEnv`; the grid lives in the environment
-    itself rather than in a wrapper so that ``env.unwrapped`` (which mope's batched evaluation copies) still
-    takes integer actions.
+    itself rather than in a wrapper so that ``env.unwrapped`` still takes integer actions and the id alone
+    rebuilds the discrete game (checkpoints rebuild their environment from ``config.env_id``).
 
     Args:
         n_accel: Grid size along the acceleration (default 3: -a_max, 0, a_max).

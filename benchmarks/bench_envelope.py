@@ -607,12 +607,17 @@ def main() -> None:
     parser.add_argument("--log-dir", type=Path, default=Path("runs/bench-envelope-logs"),
                         help="one log per trial (one progress line per evaluation)")
     parser.add_argument("--trial", type=json.loads, default=None, help=argparse.SUPPRESS)
+    parser.add_argument("--merge", type=Path, nargs="+", default=None,
+                        help="render one table from the .json outputs of earlier invocations (runs no trial)")
     args = parser.parse_args()
 
     if args.trial is not None:
         print(json.dumps(run_trial(args.trial)), flush=True)
         return
 
+    if args.merge:
+        merge(args)
+        return
     if "envelope" in args.methods:
         try:
             import morl_baselines  # noqa: F401
@@ -657,6 +662,29 @@ def main() -> None:
             results += list(pool.map(lambda s: launch(s, log_dir), mem_specs))
     info["total_wall_s"] = time.perf_counter() - t0
     info["loadavg_end"] = os.getloadavg()
+    text = render(results, args, info, command)
+    print(text)
+    args.out.with_suffix(".md").write_text(text)
+    payload = {"machine": info, "command": command, "args": {k: v for k, v in vars(args).items() if k != "trial"},
+               "summary": summarise(results, args), "results": results}
+    args.out.with_suffix(".json").write_text(json.dumps(payload, indent=1, default=str) + "\n")
+
+
+def merge(args: argparse.Namespace) -> None:
+    """One table from several invocations' outputs (e.g. Envelope's and ours' time to coverage run side by side)."""
+    payloads = [json.loads(p.read_text()) for p in args.merge]
+    results = [r for pl in payloads for r in pl["results"]]
+    present = {r.get("method") for r in results} | {COST_VARIANTS[r["variant"]][0] for r in results
+                                                      if r.get("kind") == "cost" and r.get("variant") in COST_VARIANTS}
+    args.methods = [m for m in METHODS if m in present]
+    args.parts = sorted({r["kind"] for r in results})
+    ttc_args = [pl["args"] for pl in payloads if any(r.get("kind") == "ttc" for r in pl["results"])]
+    if ttc_args:
+        args.seeds = max(a["seeds"] for a in ttc_args)
+        args.steps, args.eval_every = ttc_args[0]["steps"], ttc_args[0]["eval_every"]
+    info = payloads[0]["machine"]
+    info["merged_from"] = [str(p) for p in args.merge]
+    command = "; ".join(pl["command"] for pl in payloads)
     text = render(results, args, info, command)
     print(text)
     args.out.with_suffix(".md").write_text(text)

@@ -350,3 +350,34 @@ def _continuous_env():
     import mo_gymnasium as mo_gym
 
     return mo_gym.make("mo-mountaincarcontinuous-v0")
+
+
+class _ObsPolicy:
+    """A deterministic greedy stand-in: the action is a fixed function of (observation, preference)."""
+
+    def greedy_actions(self, obs: np.ndarray, prefs: np.ndarray) -> np.ndarray:
+        row, col = np.round(np.asarray(obs, dtype=np.float64) * 10).astype(int).T
+        down = (prefs[:, 0] > 0.5) | (col % 2 == 1)  # treasure-minded rows dive; others bounce between columns
+        return np.where(down & (row < 3), 1, np.where(col % 2 == 0, 3, 2))
+
+
+def test_closing_loops_is_exact_and_stops_early():
+    env = make_env("deep-sea-treasure-v0")
+    prefs = sample_simplex(300, 2, np.random.default_rng(0))
+    stepped = solutions(_ObsPolicy(), env, prefs, gamma=0.99, max_steps=100, close_loops=False)
+    closed = solutions(_ObsPolicy(), env, prefs, gamma=0.99, max_steps=100)
+    assert (~stepped.terminated).any() and stepped.terminated.any(), "the test needs loops and endings"
+    np.testing.assert_array_equal(closed.lengths, stepped.lengths)
+    np.testing.assert_array_equal(closed.terminated, stepped.terminated)
+    np.testing.assert_allclose(closed.returns, stepped.returns, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(closed.discounted, stepped.discounted, rtol=0, atol=1e-9)
+
+    calls = []
+
+    class Counting(_ObsPolicy):
+        def greedy_actions(self, obs, prefs):
+            calls.append(len(obs))
+            return super().greedy_actions(obs, prefs)
+
+    solutions(Counting(), env, prefs, gamma=0.99, max_steps=100)
+    assert len(calls) < 20, "loops must be closed as soon as a state repeats, not stepped to the time limit"

@@ -52,7 +52,8 @@ class Solutions:
 
 
 def solutions(agent: GreedyPolicy, env: gym.Env, prefs: np.ndarray, gamma: float,
-              max_steps: int | None = None, seed: int = 0, record_obs: bool = False) -> Solutions:
+              max_steps: int | None = None, seed: int = 0, record_obs: bool = False,
+              close_loops: bool = True) -> Solutions:
     """Play one greedy episode per preference, all episodes batched.
 
     Args:
@@ -63,6 +64,10 @@ def solutions(agent: GreedyPolicy, env: gym.Env, prefs: np.ndarray, gamma: float
         max_steps: Time limit; default the environment's registered limit, else 1000.
         seed: Reset seed of the first copy (copy ``i`` uses ``seed + i``) for stochastic environments.
         record_obs: Also return every visited observation (for path and diversity analyses).
+        close_loops: On a deterministic batched environment with a finite state space (the vectorised
+            Deep-Sea-Treasure), an episode that revisits a state under the same greedy preference repeats its
+            loop until the time limit; its remaining steps are then added in closed form instead of stepped.
+            Exact (tested against stepping); ignored with ``record_obs``.
 
     Returns:
         A :class:`Solutions`.
@@ -82,7 +87,11 @@ def solutions(agent: GreedyPolicy, env: gym.Env, prefs: np.ndarray, gamma: float
     running = np.arange(n)
     discount = 1.0
     history = [obs.copy()] if record_obs else None
-    for _ in range(max_steps):
+    loops = close_loops and not record_obs and hasattr(batch, "state_index")
+    if loops:
+        visited = np.zeros((n, batch.n_states), dtype=bool)
+        visited[running, batch.state_index(running)] = True
+    for t in range(max_steps):
         actions = agent.greedy_actions(obs[running], prefs[running])
         next_obs, rew, term = batch.step(running, actions)
         obs[running] = next_obs
@@ -94,6 +103,18 @@ def solutions(agent: GreedyPolicy, env: gym.Env, prefs: np.ndarray, gamma: float
         discount *= gamma
         if history is not None:
             history.append(obs.copy())
+        if loops and running.size:
+            state = batch.state_index(running)
+            again = visited[running, state]
+            visited[running, state] = True
+            if again.any():  # a deterministic greedy episode back in a visited state loops to the time limit
+                done, left = running[again], max_steps - (t + 1)
+                returns[done] += left * batch.loop_reward
+                # sum of gamma^k for k = t+1 .. max_steps-1
+                discounted[done] += discount * (1 - gamma**left) / (1 - gamma) * batch.loop_reward if gamma < 1 \
+                    else left * batch.loop_reward
+                lengths[done] = max_steps
+                running = running[~again]
         if running.size == 0:
             break
     observations = np.stack(history, axis=1) if history is not None else None

@@ -79,6 +79,19 @@ class DeepSeaTreasureBatch:
             layer = layer.env
         return True
 
+    #: Every step that does not end an episode gives exactly this reward (no treasure, one time step).
+    loop_reward = np.array([0.0, -1.0])
+
+    @property
+    def n_states(self) -> int:
+        """Size of the (finite, deterministic) state space: the grid cells."""
+        return int(self.map.size)
+
+    def state_index(self, idx: np.ndarray) -> np.ndarray:
+        """The state (grid cell) of the episodes ``idx``; with :attr:`loop_reward`, lets a rollout close loops."""
+        pos = self.pos[idx]
+        return pos[:, 0] * self.map.shape[1] + pos[:, 1]
+
     def _obs(self, pos: np.ndarray) -> np.ndarray:
         return pos.astype(np.float32) * 0.1 if self.float_state else pos.astype(np.int32)
 

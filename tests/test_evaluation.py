@@ -176,11 +176,13 @@ def test_envlist_steps_like_the_batched_dst(dst) -> None:  # noqa: ANN001
 @pytest.mark.parametrize("policy", [Scripted(), Constant(1), Constant(3)])
 def test_envlist_gives_the_same_solutions(dst, monkeypatch: pytest.MonkeyPatch, policy) -> None:  # noqa: ANN001
     prefs = np.stack([np.linspace(0, 1, 21), 1 - np.linspace(0, 1, 21)], axis=1)
-    fast = solutions(policy, dst, prefs, 0.99)
+    fast = solutions(policy, dst, prefs, 0.99, close_loops=False)  # step for step, bit for bit
+    closed = solutions(policy, dst, prefs, 0.99)  # loops closed in closed form: equal up to rounding
     monkeypatch.setattr(evaluation, "make_batched", lambda env, n, seed=0: EnvList(env, n, seed))
     slow = solutions(policy, dst, prefs, 0.99)
     for field in ("prefs", "returns", "discounted", "lengths", "terminated"):
         np.testing.assert_array_equal(getattr(fast, field), getattr(slow, field))
+        np.testing.assert_allclose(getattr(closed, field), getattr(slow, field), rtol=0, atol=1e-9)
 
 
 # ------------------------------------------------------------------------------------------- solutions()

@@ -144,6 +144,8 @@ class Evaluator:
         self.prefs = sample_simplex(n_prefs, self.m, np.random.default_rng(seed + 1_000_003))
         self.eum_prefs = equally_spaced(self.m, n_eum_prefs)
         self.front = known_front(env, gamma)
+        #: Close deterministic loops in closed form (see :func:`solutions`); False steps them to the time limit.
+        self.close_loops = True
         self.ref_point = (np.asarray(ref_point, dtype=np.float64) if ref_point is not None
                           else default_ref_point(env, env_id, gamma, self.max_steps))
 
@@ -156,7 +158,8 @@ class Evaluator:
             limit; and the uniform-set :class:`Solutions`.
         """
         all_prefs = np.concatenate([self.prefs, self.eum_prefs])
-        sols = solutions(agent, self.env, all_prefs, self.gamma, self.max_steps, record_obs=record_obs)
+        sols = solutions(agent, self.env, all_prefs, self.gamma, self.max_steps, record_obs=record_obs,
+                         close_loops=self.close_loops)
         n = len(self.prefs)
         uni = sols.subset(slice(0, n))
         result = metrics.evaluate_front(uni.discounted, uni.prefs, true_front=self.front, ref_point=self.ref_point)

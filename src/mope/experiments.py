@@ -200,8 +200,9 @@ def train_run(config: Config, out_dir: str | Path, progress: bool = True, overwr
 
     def on_step(ag: MoPE) -> None:
         if config.checkpoint_every and ag.global_step % config.checkpoint_every == 0:
-            ag.save(out / "checkpoints" / f"step_{ag.global_step}.pt")
+            # resume.pt first: once step_N.pt is there, the resumable state of step N is too
             ag.save(out / "checkpoints" / RESUME_CHECKPOINT, include_buffer=True)
+            ag.save(out / "checkpoints" / f"step_{ag.global_step}.pt")
 
     # SIGINT/SIGTERM set a flag that the training loop polls at each step boundary, so the interruption never
     # lands inside torch, the CSV writer or TensorBoard's writer thread.

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -12,6 +13,14 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 COLORS = {"eql": "tab:gray", "ee": "tab:blue", "pe": "tab:orange", "mope": "tab:green"}
+
+
+def save_figure(fig: Any, path: str | Path, dpi: int = 120) -> Path:
+    """Lay out, write and close a figure; return its path."""
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return Path(path)
 
 
 def mean_ci(values: np.ndarray, axis: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -48,9 +57,7 @@ def plot_curves(curves: Mapping[str, tuple[np.ndarray, np.ndarray]], path: str |
     ax.set_title(title, fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path, dpi=120)
     return Path(path)
 
 
@@ -68,9 +75,7 @@ def plot_fronts(ccs: np.ndarray, found: Mapping[str, np.ndarray], path: str | Pa
     ax.set_title("Deep-Sea-Treasure: true CCS and recovered solutions (seed 0)", fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path, dpi=120)
     return Path(path)
 
 
@@ -102,9 +107,7 @@ def plot_preference_solutions(panels: Mapping[str, tuple[np.ndarray, np.ndarray,
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("treasure of the solution (discounted)")
     axes[0][0].legend(fontsize=8, loc="upper left")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path, dpi=120)
     return Path(path)
 
 
@@ -126,9 +129,7 @@ def plot_discriminator_maps(maps: Mapping[str, np.ndarray], sea_map: np.ndarray,
         ax.set_xticks([])
         ax.set_yticks([])
         fig.colorbar(im, ax=ax, fraction=0.046)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path, dpi=120)
     return Path(path)
 
 

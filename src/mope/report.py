@@ -303,7 +303,7 @@ def render_table(groups: Sequence[Group], metrics: Sequence[str]) -> str:
 def plot_learning_curves(groups: Sequence[Group], metrics: Sequence[str], path: str | Path, n_boot: int = 2000,
                          seed: int = 0) -> Path:
     """One panel per metric: each group's mean over seeds against steps, with a bootstrap 95% band."""
-    from mope.plots import plt  # pyplot with the Agg backend
+    from mope.plots import plt, save_figure  # pyplot with the Agg backend
 
     fig, axes = plt.subplots(1, len(metrics), figsize=(4.6 * len(metrics), 3.8), squeeze=False)
     colors = _colors(groups)
@@ -321,9 +321,7 @@ def plot_learning_curves(groups: Sequence[Group], metrics: Sequence[str], path: 
         ax.set_title(f"{METRIC_LABELS.get(m, m)} (mean, bootstrap 95% CI)", fontsize=9)
         ax.grid(alpha=0.3)
     axes[0][0].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
     return Path(path)
 
 
@@ -370,7 +368,7 @@ def plot_final_fronts(groups: Sequence[Group], path: str | Path) -> Path | None:
     Returns ``None`` (and writes nothing) when no run has a ``solutions.csv``.
     """
     from mope.metrics import unique_solutions
-    from mope.plots import plt  # pyplot with the Agg backend
+    from mope.plots import plt, save_figure  # pyplot with the Agg backend
 
     found = {}
     for g in groups:
@@ -400,9 +398,7 @@ def plot_final_fronts(groups: Sequence[Group], path: str | Path) -> Path | None:
         ax.set_title(f"{env_id}: final solutions, pooled over seeds", fontsize=9)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
     return Path(path)
 
 

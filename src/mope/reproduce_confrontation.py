@@ -178,9 +178,8 @@ def plot_fig5(points: dict[str, np.ndarray], path: Path) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from mope.metrics import pareto_front
+    from mope.plots import plt, save_figure
 
     fig, ax = plt.subplots(figsize=(6.4, 4.6))
     for name, pts in points.items():
@@ -197,9 +196,7 @@ def plot_fig5(points: dict[str, np.ndarray], path: Path) -> Path:
     ax.set_title("Robot Confrontation: solutions per preference and fitted (Pareto) fronts", fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path, dpi=120)
     return path
 
 

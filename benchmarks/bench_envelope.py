@@ -664,6 +664,12 @@ def main() -> None:
             results += list(pool.map(lambda s: launch(s, log_dir), mem_specs))
     info["total_wall_s"] = time.perf_counter() - t0
     info["loadavg_end"] = os.getloadavg()
+    write_outputs(results, args, info, command)
+
+
+def write_outputs(results: list[dict[str, Any]], args: argparse.Namespace, info: dict[str, Any],
+                  command: str) -> None:
+    """Print the markdown table and write it (``--out``.md) with the raw results (``--out``.json)."""
     text = render(results, args, info, command)
     print(text)
     args.out.with_suffix(".md").write_text(text)
@@ -687,12 +693,7 @@ def merge(args: argparse.Namespace) -> None:
     info = payloads[0]["machine"]
     info["merged_from"] = [str(p) for p in args.merge]
     command = "; ".join(pl["command"] for pl in payloads)
-    text = render(results, args, info, command)
-    print(text)
-    args.out.with_suffix(".md").write_text(text)
-    payload = {"machine": info, "command": command, "args": {k: v for k, v in vars(args).items() if k != "trial"},
-               "summary": summarise(results, args), "results": results}
-    args.out.with_suffix(".json").write_text(json.dumps(payload, indent=1, default=str) + "\n")
+    write_outputs(results, args, info, command)
 
 
 if __name__ == "__main__":

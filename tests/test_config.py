@@ -21,7 +21,7 @@ def test_defaults_match_the_paper() -> None:
     assert c.hidden_sizes == (64, 128, 128, 64)  # "four fully connected hidden layers {64, 128, 128, 64}"
     assert c.pe_count_offset == 0.01  # p(w) ~ (N_i + 0.01)^(-1/2)
     assert c.gamma == 0.99
-    assert c.eval_prefs == 2000
+    assert c.run.eval_prefs == 2000
     assert c.lb_weight == 1.0
     assert c.experience_exploration and c.preference_exploration
     assert c.algo == "mope"
@@ -32,14 +32,14 @@ def test_sequences_become_tuples() -> None:
     c = Config(hidden_sizes=[32, 32], disc_hidden=[16], ref_point=[0, -25])
     assert c.hidden_sizes == (32, 32)
     assert c.disc_hidden == (16,)
-    assert c.ref_point == (0.0, -25.0)
-    assert all(isinstance(x, float) for x in c.ref_point)
+    assert c.run.ref_point == (0.0, -25.0)
+    assert all(isinstance(x, float) for x in c.run.ref_point)
 
 
 # ------------------------------------------------------------------------------------------- dict round trip
 def test_to_dict_from_dict_round_trip() -> None:
     c = Config(seed=3, total_steps=1234, gamma=0.9, hidden_sizes=(8, 16), ref_point=(0.0, -25.0), n_omega=8,
-               sigma_omega=0.1, experience_exploration=False, max_episode_steps=50, extra={"note": "x"})
+               sigma_omega=0.1, experience_exploration=False, max_episode_steps=50)
     d = c.to_dict()
     assert d["algo"] == "pe"
     assert d["hidden_sizes"] == [8, 16] and d["ref_point"] == [0.0, -25.0] and d["disc_hidden"] == [64, 64]

@@ -4,10 +4,20 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 import torch
 
-from mope.losses import envelope_target, eql_loss, mutual_information_bonus, preference_interval_td, priority
+from mope.losses import (
+    clip_targets,
+    envelope_set,
+    envelope_target,
+    eql_loss,
+    mutual_information_bonus,
+    preference_interval_td,
+    priority,
+    taken_action_q,
+)
 
 # Envelope preferences (K = 2) and the designed Q_target(s'_b, a, w') for A = 3 actions, m = 2 objectives.
 ENV_PREFS = [[1.0, 0.0], [0.0, 1.0]]
@@ -30,44 +40,20 @@ Q2 = [
 ROW_PREFS = [[1.0, 0.0], [0.0, 1.0], [0.5, 0.5]]
 
 
-class StubTarget:
-    """Stands in for the target network: returns designed Q-values and records every call."""
-
-    def __init__(self, table: torch.Tensor) -> None:
-        self.table = table  # (B, K, A, m)
-        self.calls: list[tuple[torch.Tensor, torch.Tensor]] = []
-
-    def forward_features(self, feats: torch.Tensor, prefs: torch.Tensor) -> torch.Tensor:
-        self.calls.append((feats.clone(), prefs.clone()))
-        b, k, a, m = self.table.shape
-        assert feats.shape[0] == prefs.shape[0]
-        out = []
-        for row in range(feats.shape[0]):
-            bi = int(feats[row, 0].item())  # the stub's "features" are the transition index
-            ki = [kk for kk in range(k) if torch.equal(prefs[row], ENV_PREFS_T[kk])]
-            assert len(ki) == 1, f"row {row} has a preference that is not an envelope preference: {prefs[row]}"
-            out.append(self.table[bi, ki[0]])
-        return torch.stack(out)  # (rows, A, m)
-
-
 ENV_PREFS_T = torch.tensor(ENV_PREFS)
 
 
-def run_target(gamma: float, terminated: list[float] | None = None) -> tuple[torch.Tensor, StubTarget]:
-    table = torch.tensor([Q0, Q1, Q2])
-    stub = StubTarget(table)
+def run_target(gamma: float, terminated: list[float] | None = None) -> torch.Tensor:
+    q_next = torch.tensor([Q0, Q1, Q2])  # (B, K, A, m): Q_target(s'_b, a, w'_k)
     b = 3
-    feats = torch.tensor([[0.0, 7.0], [1.0, 7.0], [2.0, 7.0]])
     rewards = torch.tensor([[1.0, -1.0], [0.0, -1.0], [3.0, -1.0]])
     term = torch.tensor(terminated if terminated is not None else [0.0, 0.0, 1.0])
     row_prefs = torch.tensor(ROW_PREFS).unsqueeze(0).expand(b, -1, -1)
-    env_prefs = ENV_PREFS_T.unsqueeze(0).expand(b, -1, -1)
-    y = envelope_target(stub, feats, rewards, term, row_prefs, env_prefs, gamma)  # type: ignore[arg-type]
-    return y, stub
+    return envelope_target(q_next, rewards, term, row_prefs, gamma)
 
 
 def test_envelope_target_hand_values() -> None:
-    y, _ = run_target(gamma=0.5)
+    y = run_target(gamma=0.5)
     assert y.shape == (3, 3, 2)
     # transition 0, reward (1, -1):
     #   w=(1,0): scalarised k0 [1, 0, .4], k1 [2, 0, .6] -> (k1, a0) -> Q* (2, -1)  -> y = (2, -1.5)
@@ -86,20 +72,17 @@ def test_envelope_target_hand_values() -> None:
 def test_envelope_target_max_is_joint_over_actions_and_envelope_prefs() -> None:
     # With the max over actions only at the row's own preference, row w=(1,0) of transition 0 would get
     # Q(s', a0, (1,0)) = (1, 0); the envelope finds (2, -1) under the other preference.
-    y, _ = run_target(gamma=1.0)
+    y = run_target(gamma=1.0)
     torch.testing.assert_close(y[0, 0], torch.tensor([1.0 + 2.0, -1.0 - 1.0]))
     assert not torch.allclose(y[0, 0], torch.tensor([1.0 + 1.0, -1.0 + 0.0]))
 
 
 def test_envelope_off_maxes_over_actions_at_the_row_preference_only() -> None:
     # envelope=False: rows are the envelope set (K = N = 2, the two one-hot preferences); row i uses only k = i.
-    table = torch.tensor([Q0, Q1])
-    stub = StubTarget(table)
-    feats = torch.tensor([[0.0, 7.0], [1.0, 7.0]])
+    q_next = torch.tensor([Q0, Q1])
     rewards = torch.tensor([[1.0, -1.0], [0.0, -1.0]])
     prefs = ENV_PREFS_T.unsqueeze(0).expand(2, -1, -1)
-    y = envelope_target(stub, feats, rewards, torch.zeros(2), prefs, prefs, 1.0,  # type: ignore[arg-type]
-                        envelope=False)
+    y = envelope_target(q_next, rewards, torch.zeros(2), prefs, 1.0, envelope=False)
     # transition 0: w=(1,0) at k0: [1, 0, .4] -> a0 (1, 0); w=(0,1) at k1: [-1, 0, .6] -> a2 (.6, .6)
     torch.testing.assert_close(y[0], torch.tensor([[2.0, -1.0], [1.6, -0.4]]))
     # transition 1: w=(1,0) at k0: [0, 1, .2] -> a1 (1, 1); w=(0,1) at k1: [.5, -2, 0] -> a0 (.5, .5)
@@ -108,47 +91,33 @@ def test_envelope_off_maxes_over_actions_at_the_row_preference_only() -> None:
 
 @pytest.mark.parametrize("gamma", [0.5, 0.9, 0.99])
 def test_envelope_target_applies_gamma(gamma: float) -> None:
-    y, _ = run_target(gamma=gamma)
+    y = run_target(gamma=gamma)
     q_star_0 = torch.tensor([[2.0, -1.0], [0.0, 1.0], [0.6, 0.6]])
     torch.testing.assert_close(y[0], torch.tensor([1.0, -1.0]) + gamma * q_star_0)
     torch.testing.assert_close(y[2], torch.tensor([[3.0, -1.0]] * 3))
 
 
 def test_envelope_target_terminated_rows_get_only_reward() -> None:
-    y, _ = run_target(gamma=0.9, terminated=[1.0, 1.0, 1.0])
+    y = run_target(gamma=0.9, terminated=[1.0, 1.0, 1.0])
     torch.testing.assert_close(y[0], torch.tensor([[1.0, -1.0]] * 3))
     torch.testing.assert_close(y[1], torch.tensor([[0.0, -1.0]] * 3))
     torch.testing.assert_close(y[2], torch.tensor([[3.0, -1.0]] * 3))
 
 
-def test_envelope_target_calls_network_once_with_b_times_k_rows() -> None:
-    _, stub = run_target(gamma=0.5)
-    assert len(stub.calls) == 1
-    feats, prefs = stub.calls[0]
-    b, n, k = 3, 3, 2
-    assert feats.shape == (b * k, 2)  # 6 rows, never B * N * K = 18
-    assert prefs.shape == (b * k, 2)
-    # row b * K + k holds transition b's features and its k-th envelope preference
-    torch.testing.assert_close(feats[:, 0], torch.tensor([0.0, 0.0, 1.0, 1.0, 2.0, 2.0]))
-    torch.testing.assert_close(feats[:, 1], torch.full((6,), 7.0))
-    torch.testing.assert_close(prefs, torch.tensor(ENV_PREFS * b))
-    assert feats.shape[0] != b * n * k
+def test_double_q_selects_with_one_table_and_reads_the_other() -> None:
+    q_next = torch.tensor([Q0])
+    q_select = torch.tensor([Q1])  # the online network's view: its argmax picks the (k, a) read from q_next
+    rows = torch.tensor([ROW_PREFS])
+    y = envelope_target(q_next, torch.zeros(1, 2), torch.zeros(1), rows, 1.0, q_select=q_select)
+    # on Q1: w=(1,0) -> (k1, a1); w=(0,1) -> (k0, a0); w=(.5,.5) -> (k0, a0); read at those indices of Q0
+    torch.testing.assert_close(y[0], torch.tensor([[0.0, 0.0], [1.0, 0.0], [1.0, 0.0]]))
 
 
 def test_envelope_target_with_different_k_and_n() -> None:
     # K = 1: the envelope collapses to a max over actions at that single preference
-    table = torch.tensor([[Q0[1]]])  # (1, 1, 3, 2): Q under w' = (0, 1)
-    calls = []
-
-    class One:
-        def forward_features(self, feats: torch.Tensor, prefs: torch.Tensor) -> torch.Tensor:
-            calls.append(feats.shape[0])
-            return table.reshape(1, 3, 2)
-
+    q_next = torch.tensor([[Q0[1]]])  # (1, 1, 3, 2): Q under w' = (0, 1)
     rows = torch.tensor([[[1.0, 0.0], [0.0, 1.0], [0.5, 0.5], [0.25, 0.75]]])
-    y = envelope_target(One(), torch.zeros(1, 4), torch.zeros(1, 2), torch.zeros(1), rows,  # type: ignore[arg-type]
-                        torch.tensor([[[0.0, 1.0]]]), 1.0)
-    assert calls == [1]
+    y = envelope_target(q_next, torch.zeros(1, 2), torch.zeros(1), rows, 1.0)
     # Q = [(2,-1), (0,0), (.6,.6)]; w=(1,0) -> a0; w=(0,1) -> a2; w=(.5,.5) -> a2 (.6 > .5); w=(.25,.75) -> a2
     torch.testing.assert_close(y[0], torch.tensor([[2.0, -1.0], [0.6, 0.6], [0.6, 0.6], [0.6, 0.6]]))
 
@@ -161,18 +130,45 @@ def test_envelope_target_with_real_network_shapes() -> None:
     torch.manual_seed(0)
     net = QNetwork(gym.spaces.Box(0.0, 1.0, (3,)), n_actions=4, n_objectives=2, hidden=(8,))
     b, n, k = 5, 6, 7
-    feats = torch.rand(b, 3)
+    obs = torch.rand(b, 3)
     rows = torch.softmax(torch.randn(b, n, 2), -1)
     env = torch.softmax(torch.randn(b, k, 2), -1)
-    y = envelope_target(net, feats, torch.zeros(b, 2), torch.zeros(b), rows, env, 1.0)
+    q_next = net.forward_prefs(obs, env)
+    assert q_next.shape == (b, k, 4, 2)
+    y = envelope_target(q_next, torch.zeros(b, 2), torch.zeros(b), rows, 1.0)
     assert y.shape == (b, n, 2)
     # brute force: for every row, the best (a, w') of w^T Q(s', a, w')
     for bi in range(b):
-        q = net.forward_features(feats[bi].expand(k, 3), env[bi])  # (K, A, m)
+        q = net(obs[bi].expand(k, 3), env[bi])  # (K, A, m)
+        torch.testing.assert_close(q, q_next[bi])
         for i in range(n):
             scal = (q * rows[bi, i]).sum(-1)
             kk, aa = divmod(int(scal.argmax()), 4)
             torch.testing.assert_close(y[bi, i], q[kk, aa])
+
+
+def test_envelope_set_modes() -> None:
+    rows = torch.rand(2, 3, 2)
+    acting = torch.tensor([[0.2, 0.8], [0.6, 0.4]])
+    same, env = envelope_set("relabel", rows, acting)
+    assert same is rows and env
+    own, env = envelope_set("own", rows, acting)
+    assert own is rows and not env
+    batch, env = envelope_set("batch", rows, acting)
+    assert batch.shape == (2, 2, 2) and env and torch.equal(batch[0], acting) and torch.equal(batch[1], acting)
+    both, _ = envelope_set("both", rows, acting)
+    assert both.shape == (2, 5, 2) and torch.equal(both[:, :3], rows)
+
+
+def test_clip_targets_and_taken_action_q() -> None:
+    y = torch.tensor([[[5.0, -200.0], [-1.0, 0.5]]])
+    torch.testing.assert_close(clip_targets(y, torch.tensor([0.0, -100.0]), torch.tensor([3.0, -1.0])),
+                               torch.tensor([[[3.0, -100.0], [0.0, -1.0]]]))
+    q_all = torch.arange(2 * 3 * 4 * 2, dtype=torch.float32).view(2, 3, 4, 2)
+    q = taken_action_q(q_all, torch.tensor([1, 3]))
+    assert q.shape == (2, 3, 2)
+    torch.testing.assert_close(q[0], q_all[0, :, 1])
+    torch.testing.assert_close(q[1], q_all[1, :, 3])
 
 
 # ------------------------------------------------------------------------------------------- EQL loss
@@ -244,16 +240,22 @@ def test_priority_hand_values_with_bonus_and_clipping() -> None:
     bonus = torch.tensor([1.0, 0.5, -10.0])
     p = priority(td, bonus, alpha=0.1, eps=0.01)
     # |td| + 0.1 * bonus = [0.35, 2.05, -0.5] -> clip at 0 -> + 0.01
-    torch.testing.assert_close(p, torch.tensor([0.36, 2.06, 0.01]))
+    np.testing.assert_allclose(p, [0.36, 2.06, 0.01], rtol=1e-6)
 
 
 def test_priority_without_discriminator() -> None:
     td = torch.tensor([0.25, -2.0, 0.5, 0.0])
     p = priority(td, None, alpha=0.1, eps=0.01)
-    torch.testing.assert_close(p, torch.tensor([0.26, 2.01, 0.51, 0.01]))
+    np.testing.assert_allclose(p, [0.26, 2.01, 0.51, 0.01], rtol=1e-6)
 
 
 def test_priority_alpha_zero_ignores_bonus() -> None:
     td = torch.tensor([-0.3, 0.7])
     p = priority(td, torch.tensor([-100.0, 100.0]), alpha=0.0, eps=1e-3)
-    torch.testing.assert_close(p, torch.tensor([0.301, 0.701]))
+    np.testing.assert_allclose(p, [0.301, 0.701], rtol=1e-6)
+
+
+def test_priority_applies_the_per_exponent() -> None:
+    td = torch.tensor([0.99, 3.99])
+    p = priority(td, None, alpha=0.1, eps=0.01, per_alpha=0.5)
+    np.testing.assert_allclose(p, [1.0, 2.0], rtol=1e-6)  # (|td| + eps) ** 0.5

@@ -27,10 +27,10 @@ def test_reproduce_dst_writes_figures_and_table(tmp_path):
         assert 0.0 <= r["cr"]["mean"] <= 1.0 and r["steps_to_cr1"]["seeds"] == 2
         assert r["paths_per_solution"] >= 0 and r["mi_state_pref"] >= 0
     # a second call reuses the finished runs instead of training again
-    stamp = (tmp_path / "eql" / "seed_0" / "summary.json").stat().st_mtime
+    stamp = (tmp_path / "eql-s0" / "summary.json").stat().st_mtime
     reproduce_dst(tmp_path, seeds=2, steps=300, eval_every=150, algos=("eql", "mope"), workers=2, progress=False,
                   **TINY)
-    assert (tmp_path / "eql" / "seed_0" / "summary.json").stat().st_mtime == stamp
+    assert (tmp_path / "eql-s0" / "summary.json").stat().st_mtime == stamp
     assert res["table"] == table.strip()
 
 

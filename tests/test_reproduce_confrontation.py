@@ -121,13 +121,15 @@ def test_reproduce_confrontation_tiny(tmp_path) -> None:
 def test_a_saved_ppo_policy_of_another_budget_is_not_reused(tmp_path):
     import json
 
-    from mope.errors import ConfigError
-    from mope.reproduce_confrontation import _train_ppo
+    from mope.jobs import run_job
 
-    path = tmp_path / "ppo" / "pref_00.zip"
-    path.parent.mkdir(parents=True)
-    path.write_bytes(b"not trained here")
-    path.with_suffix(".json").write_text(json.dumps({"pref": [1.0, 0.0], "steps": 64, "seed": 0}))
-    assert _train_ppo([1.0, 0.0], 64, 0, str(path), "cpu") == str(path)  # same budget: reused, not retrained
-    with pytest.raises(ConfigError, match="steps"):
-        _train_ppo([1.0, 0.0], 128, 0, str(path), "cpu")
+    meta = {"pref": [1.0, 0.0], "steps": 64, "seed": 0, "env_id": "mope/RobotConfrontation-v0"}
+    folder = tmp_path / "ppo-s0-pref00"
+    folder.mkdir()
+    (folder / "policy.zip").write_bytes(b"not trained here")
+    (folder / "summary.json").write_text(json.dumps({"meta": meta, "final": {"wall_s": 1.0}}))
+    rec = run_job("ppo-s0-pref00", "ppo", {**meta, "device": "cpu"}, str(folder))
+    assert rec["status"] == "finished" and rec["action"] == "skipped"  # same budget: reused, not retrained
+    assert (folder / "policy.zip").read_bytes() == b"not trained here"
+    rec = run_job("ppo-s0-pref00", "ppo", {**meta, "steps": 128, "device": "cpu"}, str(folder))
+    assert rec["status"] == "failed" and "steps" in rec["error"]

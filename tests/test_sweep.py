@@ -15,9 +15,9 @@ from mope.agent import MoPE
 from mope.config import Config
 from mope.errors import MopeError
 from mope.experiments import train_run
+from mope.jobs import JobError, run_job_remote, unpack_job
 from mope.sweep import (
     SweepError,
-    _run_trial_remote,
     apply_overrides,
     expand,
     load_spec,
@@ -25,7 +25,6 @@ from mope.sweep import (
     parse_spec,
     run_sweep,
     trial_name,
-    unpack_trial,
 )
 
 TINY = {"env_id": "deep-sea-treasure-v0", "total_steps": 300, "eval_every": 100, "eval_prefs": 50, "n_omega": 4,
@@ -159,19 +158,24 @@ def test_rerun_skips_finished_resumes_interrupted_and_records_failures(local_swe
     # seed 0: finished earlier -> skipped
     shutil.copytree(local_sweep / trials[0].name, tmp_path / trials[0].name)
     # seed 1: interrupted at step 150 by SIGINT (as Ctrl-C would) -> resumed from checkpoints/resume.pt
-    original_train = MoPE.train
+    import mope.experiments as experiments
+    from mope.runner import Callback
 
-    def interrupted_train(self: MoPE, *args: object, stop: object = None, **kwargs: object) -> object:
-        def stop_at_150() -> bool:
-            if self.global_step == 150:
+    original_train = experiments.train
+
+    class SigintAt150(Callback):
+        def on_step(self, agent: MoPE, stats: object) -> bool:
+            if agent.global_step == 150:
                 signal.raise_signal(signal.SIGINT)
-            return stop()  # type: ignore[operator]
-        return original_train(self, *args, stop=stop_at_150, **kwargs)
+            return True
 
-    monkeypatch.setattr(MoPE, "train", interrupted_train)
+    def interrupted_train(agent: MoPE, steps: int, callbacks: list) -> object:
+        return original_train(agent, steps, [SigintAt150(), *callbacks])
+
+    monkeypatch.setattr(experiments, "train", interrupted_train)
     with pytest.raises(KeyboardInterrupt):
         train_run(trials[1].config, tmp_path / trials[1].name, progress=False)
-    monkeypatch.setattr(MoPE, "train", original_train)
+    monkeypatch.setattr(experiments, "train", original_train)
     assert (tmp_path / trials[1].name / "checkpoints" / "resume.pt").is_file()
     assert not (tmp_path / trials[1].name / "summary.json").exists()
     # seed 2: its folder cannot hold checkpoints -> failed, recorded, the others go on
@@ -198,13 +202,13 @@ def test_rerun_skips_finished_resumes_interrupted_and_records_failures(local_swe
 def test_a_ray_node_without_the_sweep_folder_sends_the_trial_back(tmp_path: Path) -> None:
     # a worker node that does not see <out>/sweep.json trains into a temporary folder and returns it packed
     config = Config.for_algo("eql", **{**TINY, "total_steps": 60, "eval_every": 0, "learning_starts": 20})
-    rec = _run_trial_remote("t-s0", config.to_dict(), str(tmp_path / "elsewhere" / "t-s0"))
+    rec = run_job_remote("t-s0", "train", config.to_dict(), str(tmp_path / "elsewhere" / "t-s0"))
     assert rec["status"] == "finished" and not (tmp_path / "elsewhere").exists()
     out, archive = tmp_path / "sweep", rec["archive"]
-    unpack_trial(rec, out)
+    unpack_job(rec, out)
     assert "archive" not in rec
     assert {p.name for p in (out / "t-s0").iterdir()} >= {"config.json", "metrics.csv", "summary.json", "solutions.csv"}
     assert (out / "t-s0" / "checkpoints" / "final.pt").is_file()
     assert not (out / "t-s0" / "checkpoints" / "resume.pt").exists()
-    with pytest.raises(SweepError, match="holds files outside its folder"):
-        unpack_trial({"name": "other", "archive": archive}, out)
+    with pytest.raises(JobError, match="holds files outside its folder"):
+        unpack_job({"name": "other", "archive": archive}, out)

@@ -12,8 +12,8 @@ from typing import Annotated, Any
 
 import typer
 
-from mope.config import ALGOS, Config, unknown_key_error
-from mope.errors import ConfigError, MopeError, one_line, suggest
+from mope.config import ALGOS, Config, check_algo, unknown_key_error
+from mope.errors import ConfigError, MopeError, one_line
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Multi-objective RL with Preference Exploration (MoPE) and Envelope Q-learning.")
@@ -48,31 +48,48 @@ def _parse_sets(items: list[str]) -> dict[str, Any]:
     return out
 
 
+_D = Config()
+
+
+def _default(name: str) -> str:
+    value = _D.to_dict()[name]
+    return ",".join(map(str, value)) if isinstance(value, list) else str(value)
+
+
 @app.command()
 def train(
-    env: Annotated[str | None, typer.Option(help="Environment id (MO-Gymnasium) [default: deep-sea-treasure-v0].")
+    env: Annotated[str | None, typer.Option(help=f"Environment id (MO-Gymnasium) \\[default: {_default('env_id')}]")
                    ] = None,
-    algo: Annotated[str | None, typer.Option(help=f"Variant: {', '.join(ALGOS)} [default: mope].")] = None,
-    steps: Annotated[int | None, typer.Option(help="Environment steps.")] = None,
-    seed: Annotated[int | None, typer.Option(help="Random seed.")] = None,
-    out: Annotated[Path | None, typer.Option(help="Run folder (default runs/<env>-<algo>-s<seed>).")] = None,
-    eval_every: Annotated[int | None, typer.Option(help="Evaluate every N steps (0: only at the end).")] = None,
-    eval_prefs: Annotated[int | None, typer.Option(help="Preferences per evaluation (paper: 2000).")] = None,
-    n_omega: Annotated[int | None, typer.Option(help="Relabeled preferences per transition, N_omega.")] = None,
-    sigma_omega: Annotated[float | None, typer.Option(help="Relabeling radius, sigma_omega.")] = None,
-    mi_alpha: Annotated[float | None, typer.Option(help="Weight alpha of the MI priority term (eq. 7).")] = None,
-    n_intervals: Annotated[int | None, typer.Option(help="Preference intervals N_I for PE.")] = None,
-    hidden: Annotated[str | None, typer.Option(help="Q-network hidden sizes, e.g. 64,128,128,64.")] = None,
-    device: Annotated[str | None, typer.Option(help="cpu, cuda or auto.")] = None,
+    algo: Annotated[str | None, typer.Option(help=f"Variant: {', '.join(ALGOS)} \\[default: mope]")] = None,
+    steps: Annotated[int | None, typer.Option(help=f"Environment steps \\[default: {_default('total_steps')}]")] = None,
+    seed: Annotated[int | None, typer.Option(help=f"Random seed \\[default: {_default('seed')}]")] = None,
+    out: Annotated[Path | None, typer.Option(help="Run folder \\[default: runs/<env>-<algo>-s<seed>]")] = None,
+    eval_every: Annotated[int | None, typer.Option(
+        help=f"Evaluate every N steps, 0: only at the end \\[default: {_default('eval_every')}]")] = None,
+    eval_prefs: Annotated[int | None, typer.Option(
+        help=f"Preferences per evaluation (paper: 2000) \\[default: {_default('eval_prefs')}]")] = None,
+    n_omega: Annotated[int | None, typer.Option(
+        help=f"Relabeled preferences per transition, N_omega \\[default: {_default('n_omega')}]")] = None,
+    sigma_omega: Annotated[float | None, typer.Option(
+        help=f"Relabeling radius, sigma_omega \\[default: {_default('sigma_omega')}]")] = None,
+    mi_alpha: Annotated[float | None, typer.Option(
+        help=f"Weight alpha of the MI priority term (eq. 7) \\[default: {_default('mi_alpha')}]")] = None,
+    n_intervals: Annotated[int | None, typer.Option(
+        help=f"Preference intervals N_I for PE \\[default: {_default('n_intervals')}]")] = None,
+    hidden: Annotated[str | None, typer.Option(
+        help=f"Q-network hidden sizes \\[default: {_default('hidden_sizes')}]")] = None,
+    device: Annotated[str | None, typer.Option(help=f"cpu, cuda or auto \\[default: {_default('device')}]")] = None,
     config: Annotated[Path | None, typer.Option(help="JSON/YAML config file; flags override it.")] = None,
-    set_: Annotated[list[str] | None, typer.Option("--set", help="Any config field: --set batch_size=64.")] = None,
+    set_: Annotated[list[str] | None, typer.Option(
+        "--set", help="Any config field, one or several: --set batch_size=64 gamma=0.9.")] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing run in --out.")] = False,
-    resume: Annotated[Path | None, typer.Option(help="Continue the run in this folder from its last checkpoint.",
-                                                 metavar="RUN_DIR")] = None,
+    resume: Annotated[Path | None, typer.Option(
+        help="Continue the run in this folder from its last checkpoint (a run killed before its first "
+             "checkpoint starts over with its saved config).", metavar="RUN_DIR")] = None,
     progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
 ) -> None:
     """Train an agent, evaluating CR/HV/EUM as it goes; writes a run folder."""
-    from mope.experiments import RunFolderError, run_status, train_run
+    from mope.experiments import train_run
 
     run_dir = resume
     try:
@@ -82,38 +99,14 @@ def train(
                            ("--eval-prefs", eval_prefs), ("--n-omega", n_omega), ("--sigma-omega", sigma_omega),
                            ("--mi-alpha", mi_alpha), ("--n-intervals", n_intervals), ("--hidden", hidden),
                            ("--overwrite", overwrite))
-            given = [name for name, v in flags_given if v is not None and v is not False and v != []]
-            if given:
-                raise ConfigError(f"--resume continues a run with its saved config; drop {', '.join(given)}")
-            if not (resume / "config.json").is_file():
-                raise RunFolderError(f"--resume '{resume}' is not a mope run folder (no config.json)")
-            if run_status(resume) == "new":
-                raise RunFolderError(f"--resume '{resume}' has no checkpoints/resume.pt to continue from")
-            cfg = Config.load(resume / "config.json")
-            if device is not None:
-                cfg = cfg.replace(device=device)
-            result = train_run(cfg, resume, progress=progress, resume=True)
-            _print_final(cfg, result)
+            _resume(resume, [name for name, v in flags_given if v is not None and v is not False and v != []],
+                    device, progress)
             return
-        base: dict[str, Any] = Config.load(config).to_dict() if config else {}
-        base_algo = base.pop("algo", None)  # a config file's variant and env hold unless --algo / --env are given
-        env = env or base.get("env_id") or "deep-sea-treasure-v0"
-        algo = algo or base_algo or "mope"
-        if algo not in ALGOS:
-            raise ConfigError(f"unknown algorithm '{algo}'{suggest(algo, ALGOS)}; choose one of {', '.join(ALGOS)}")
         flags = {"env_id": env, "total_steps": steps, "seed": seed, "eval_every": eval_every,
                  "eval_prefs": eval_prefs, "n_omega": n_omega, "sigma_omega": sigma_omega, "mi_alpha": mi_alpha,
-                 "n_intervals": n_intervals, "device": device}
-        if hidden is not None:
-            try:
-                flags["hidden_sizes"] = [int(x) for x in hidden.split(",")]
-            except ValueError:
-                raise ConfigError(f"--hidden '{hidden}' is not a comma-separated list of integers") from None
-        base.update({k: v for k, v in flags.items() if v is not None})
-        base.update(_parse_sets(set_ or []))
-        base.pop("experience_exploration", None)
-        base.pop("preference_exploration", None)
-        cfg = Config.for_algo(algo, **base)
+                 "n_intervals": n_intervals, "device": device,
+                 "hidden_sizes": _int_list("--hidden", hidden) if hidden is not None else None}
+        cfg = _config_from_cli(config, algo, flags, set_ or [])
         run_dir = out or Path("runs") / f"{cfg.env_id}-{cfg.algo}-s{cfg.seed}"
         result = train_run(cfg, run_dir, progress=progress, overwrite=overwrite)
     except MopeError as exc:
@@ -123,6 +116,40 @@ def train(
         typer.echo(f"\ninterrupted; the training state is saved in {run_dir}/checkpoints/resume.pt\n"
                    f"continue with: mope train --resume {run_dir}", err=True)
         raise typer.Exit(130) from None
+    _print_final(cfg, result)
+
+
+def _int_list(flag: str, text: str) -> list[int]:
+    try:
+        return [int(x) for x in text.split(",")]
+    except ValueError:
+        raise ConfigError(f"{flag} '{text}' is not a comma-separated list of integers") from None
+
+
+def _config_from_cli(config_file: Path | None, algo: str | None, flags: dict[str, Any], sets: list[str]) -> Config:
+    """Config file, then flags, then ``--set``; ``--algo`` (or the file's variant, else mope) sets the variant."""
+    base = Config.load(config_file) if config_file else Config()
+    variant = check_algo(algo or (base.algo if config_file else "mope"))
+    changes = {k: v for k, v in flags.items() if v is not None}
+    changes.update(_parse_sets(sets))
+    return base.with_algo(variant).replace(**changes)
+
+
+def _resume(run_dir: Path, given: list[str], device: str | None, progress: bool) -> None:
+    """``mope train --resume RUN_DIR``: continue from resume.pt, or start over a run that has none yet."""
+    from mope.experiments import RunFolderError, run_status, train_run
+
+    if given:
+        raise ConfigError(f"--resume continues a run with its saved config; drop {', '.join(given)}")
+    if not (run_dir / "config.json").is_file():
+        raise RunFolderError(f"--resume '{run_dir}' is not a mope run folder (no config.json)")
+    cfg = Config.load(run_dir / "config.json")
+    if device is not None:
+        cfg = cfg.replace(device=device)
+    if run_status(run_dir) == "new":
+        typer.echo(f"{run_dir} has no checkpoint yet (it was stopped before step {cfg.run.checkpoint_every}): "
+                   "starting it over with its saved config", err=True)
+    result = train_run(cfg, run_dir, progress=progress, resume=True)
     _print_final(cfg, result)
 
 
@@ -324,12 +351,32 @@ def envs() -> None:
         typer.echo(env_id)
 
 
+def expand_set_args(argv: list[str]) -> list[str]:
+    """Let one ``--set`` take several ``KEY=VALUE`` pairs: ``--set a=1 b=2`` becomes ``--set a=1 --set b=2``.
+
+    After a ``--set`` and its first pair, every following argument that holds ``=`` and does not start with
+    ``-`` is another pair.
+    """
+    out: list[str] = []
+    state = ""  # "": outside, "value": the next argument is --set's own value, "more": extra pairs may follow
+    for arg in argv:
+        if state == "value":
+            out.append(arg)
+            state = "more"
+        elif state == "more" and not arg.startswith("-") and "=" in arg:
+            out += ["--set", arg]
+        else:
+            out.append(arg)
+            state = "value" if arg == "--set" else "more" if arg.startswith("--set=") else ""
+    return out
+
+
 def main() -> None:
     """Entry point of the ``mope`` script: usage errors and library errors are one ``error:`` line, exit 2."""
     from typer._click.exceptions import NoArgsIsHelpError, UsageError
 
     try:
-        rv = app(standalone_mode=False)
+        rv = app(args=expand_set_args(sys.argv[1:]), standalone_mode=False)
     except UsageError as exc:
         if not isinstance(exc, NoArgsIsHelpError):
             typer.echo(f"error: {one_line(exc.format_message())}", err=True)

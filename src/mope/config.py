@@ -22,7 +22,8 @@ from typing import Any
 
 from mope.errors import ConfigError, suggest
 
-#: Algorithm name -> (experience_exploration, preference_exploration). Fig. 2 of the paper.
+#: Algorithm name -> (experience_exploration, preference_exploration). Fig. 2 of the paper. The one place that
+#: maps a variant to its switches (read it through :meth:`Config.for_algo`).
 ALGOS: dict[str, tuple[bool, bool]] = {
     "eql": (False, False),
     "ee": (True, False),
@@ -31,35 +32,127 @@ ALGOS: dict[str, tuple[bool, bool]] = {
 }
 
 ENVELOPE_PREFS = ("relabel", "batch", "both", "own")
+ENCODINGS = ("scale", "onehot", "auto")
+Q_HEADS = ("conditioned", "convex")
 DEVICES = ("cpu", "cuda", "auto")
+
+
+def _is_int(x: Any) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool)
+
+
+def _is_num(x: Any) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+def _finite(x: Any) -> bool:
+    return _is_num(x) and math.isfinite(x)
+
+
+#: Type annotation (as written in the dataclasses) -> (check, what the value must be).
+_TYPE_CHECKS: dict[str, tuple[Callable[[Any], bool], str]] = {
+    "int": (_is_int, "an integer"),
+    "float": (_is_num, "a number"),
+    "bool": (lambda x: isinstance(x, bool), "true or false"),
+    "str": (lambda x: isinstance(x, str), "a string"),
+    "int | None": (lambda x: x is None or _is_int(x), "an integer or null"),
+    "float | None": (lambda x: x is None or _is_num(x), "a number or null"),
+    "tuple[int, ...]": (lambda x: isinstance(x, (list, tuple)) and all(_is_int(v) for v in x),
+                        "a list of integers"),
+    "tuple[float, ...] | None": (lambda x: x is None or (isinstance(x, (list, tuple)) and all(_is_num(v) for v in x)),
+                                 "a list of numbers or null"),
+}
+
+
+def _check_types(obj: Any) -> None:
+    """Raise :class:`ConfigError` for a field of the wrong type (a quoted number, a bool for a count, ...)."""
+    for f in dataclasses.fields(obj):
+        if f.type not in _TYPE_CHECKS:
+            continue
+        ok, what = _TYPE_CHECKS[f.type]
+        value = getattr(obj, f.name)
+        if not ok(value):
+            raise ConfigError(f"{f.name}={value!r} is not {what}")
+
+
+def _need(obj: Any, ok: bool, name: str, allowed: str) -> None:
+    if not ok:
+        raise ConfigError(f"{name}={getattr(obj, name)!r} is out of range: {allowed}")
+
+
+@dataclass
+class RunSettings:
+    """How a run is executed and recorded: device, evaluation, checkpoints, logs. Nothing here changes learning.
+
+    The agent reads only ``device`` (where its networks live); the runner (:mod:`mope.runner`,
+    :func:`mope.experiments.train_run`) reads the rest.
+    """
+
+    device: str = "cpu"
+    #: torch intra-op threads; 0 leaves torch's default. 1 is fastest for these small networks on 2 cores.
+    torch_threads: int = 1
+    eval_every: int = 1_000
+    eval_prefs: int = 2_000
+    #: Reference point for hypervolume; ``None`` uses the environment's documented default.
+    ref_point: tuple[float, ...] | None = None
+    checkpoint_every: int = 5_000
+    #: Training statistics (losses, |TD|, Q, MI bonus) are averaged over this many steps and logged.
+    log_every: int = 100
+
+    def __post_init__(self) -> None:
+        _check_types(self)
+        if self.ref_point is not None:
+            self.ref_point = tuple(float(x) for x in self.ref_point)
+        need = functools.partial(_need, self)
+        need(self.device in DEVICES, "device", f"choose one of {', '.join(DEVICES)}")
+        need(self.torch_threads >= 0, "torch_threads", "must be >= 0")
+        need(self.eval_every >= 0, "eval_every", "must be >= 0 (0: never)")
+        need(self.eval_prefs >= 1, "eval_prefs", "must be >= 1")
+        need(self.ref_point is None or all(math.isfinite(x) for x in self.ref_point), "ref_point",
+             "must be finite numbers")
+        need(self.checkpoint_every >= 0, "checkpoint_every", "must be >= 0 (0: only at the end)")
+        need(self.log_every >= 1, "log_every", "must be >= 1")
+
+    @classmethod
+    def field_names(cls) -> list[str]:
+        return [f.name for f in dataclasses.fields(cls)]
 
 
 @dataclass
 class Config:
-    """All settings of one training run.
+    """All settings of one training run: the learner's hyperparameters, and ``run`` (:class:`RunSettings`).
 
-    Attributes are grouped as: run, EQL core, prioritized replay, experience exploration (EE),
-    preference exploration (PE) and evaluation. ``algo`` is derived from the two exploration switches.
+    Hyperparameters are grouped as: task, EQL core, prioritized replay, experience exploration (EE),
+    preference exploration (PE). ``algo`` is derived from the two exploration switches. Every setting, those of
+    ``run`` included, is one flat key for ``Config(**kwargs)``, ``--set KEY=VALUE``, sweep specs and
+    ``config.json``; in code, run settings are read as ``config.run.eval_every``.
     """
 
-    # --- run -------------------------------------------------------------------------------------------
+    # --- task ------------------------------------------------------------------------------------------
     env_id: str = "deep-sea-treasure-v0"
     seed: int = 0
     total_steps: int = 20_000
-    device: str = "cpu"
-    #: torch intra-op threads; 0 leaves torch's default. 1 is fastest for these small networks on 2 cores.
-    torch_threads: int = 1
     #: Episode time limit; ``None`` uses the limit the environment registers (100 on Deep-Sea-Treasure).
     max_episode_steps: int | None = None
 
-    #: How observations enter the networks: "scale" (a bounded Box to [0, 1]: the paper's (x, y) input) or
-    #: "onehot" (each coordinate of an integer Box one-hot encoded).
+    #: How observations enter the networks: "scale" (a bounded Box to [0, 1]: the paper's (x, y) input),
+    #: "onehot" (each coordinate of an integer Box one-hot encoded), or "auto" (onehot for a small integer Box,
+    #: else scale).
     obs_encoding: str = "scale"
 
     # --- EQL core (paper eq. 4; Yang et al. 2019) ------------------------------------------------------------
     gamma: float = 0.99
+    #: Q-network head: "conditioned" (the paper: omega is an input, one vector per action and objective) or
+    #: "convex" (C return vectors per action; Q(s, a, w) is the one w prefers: mope.networks.ConvexQNetwork).
+    q_head: str = "conditioned"
+    #: C, return vectors per action of the convex head.
+    n_components: int = 12
+    #: Weight of the convex head's component loss (each target also trains its nearest component).
+    component_loss_weight: float = 1.0
     hidden_sizes: tuple[int, ...] = (64, 128, 128, 64)
     learning_rate: float = 1e-3
+    #: Cosine decay of the learning rate to this value over total_steps; None keeps it constant.
+    learning_rate_end: float | None = None
     batch_size: int = 32
     buffer_size: int = 20_000
     learning_starts: int = 200
@@ -67,8 +160,12 @@ class Config:
     gradient_steps: int = 1
     #: Hard target-network copy every this many environment steps (Yang et al. use 100).
     target_update_freq: int = 100
+    #: Polyak averaging of the target network at every step with this weight; None: the hard copy above.
+    target_tau: float | None = None
     #: Weight of the auxiliary loss: L = L^A + lb_weight * L^B. The paper uses 1.
     lb_weight: float = 1.0
+    #: Homotopy of Yang et al.: the weight of L^B rises linearly from 0 to lb_weight over this many steps (0: off).
+    lb_homotopy_steps: int = 0
     max_grad_norm: float | None = 10.0
     #: Pick (a*, w'*) of the envelope target with the online network, read the value from the target network
     #: (double Q-learning). Not in the paper; see docs/design.md for why it is on by default.
@@ -92,6 +189,9 @@ class Config:
     # --- experience exploration (EE): relabeling, eq. 5-7 ----------------------------------------------------
     experience_exploration: bool = True
     sigma_omega: float = 0.04
+    #: Share of a transition's N_omega relabeled preferences drawn uniformly from the whole simplex instead of
+    #: within sigma_omega (EE only; 0 is the paper's similar-preference relabeling).
+    relabel_broad: float = 0.0
     #: Preference set the envelope max runs over: the transition's own relabeled set ("relabel"),
     #: the acting preferences of the whole batch ("batch"), or both; "own" switches the envelope off (each row maxes
     #: over actions at its own preference only: an ablation, like morl-baselines' ``envelope=False``).
@@ -107,52 +207,15 @@ class Config:
     #: The constant in p(omega) ~ (N_i + c)^(-1/2); the paper uses 0.01.
     pe_count_offset: float = 0.01
 
-    # --- evaluation ------------------------------------------------------------------------------------------
-    eval_every: int = 1_000
-    eval_prefs: int = 2_000
-    #: Reference point for hypervolume; ``None`` uses the environment's documented default.
-    ref_point: tuple[float, ...] | None = None
-    checkpoint_every: int = 5_000
-
-    extra: dict[str, Any] = field(default_factory=dict, repr=False)
+    run: RunSettings = field(default_factory=RunSettings)
 
     def __post_init__(self) -> None:
-        self._check_types()
+        _check_types(self)
+        if not isinstance(self.run, RunSettings):
+            raise ConfigError(f"run={self.run!r} is not a RunSettings")
         self.hidden_sizes = tuple(self.hidden_sizes)
         self.disc_hidden = tuple(self.disc_hidden)
-        if self.ref_point is not None:
-            self.ref_point = tuple(float(x) for x in self.ref_point)
         self.validate()
-
-    def _check_types(self) -> None:
-        """Raise :class:`ConfigError` for a value of the wrong type (a quoted number, a bool for a count, ...)."""
-
-        def is_int(x: Any) -> bool:
-            return isinstance(x, int) and not isinstance(x, bool)
-
-        def is_num(x: Any) -> bool:
-            return isinstance(x, (int, float)) and not isinstance(x, bool)
-
-        checks: dict[str, tuple[Callable[[Any], bool], str]] = {
-            "int": (is_int, "an integer"),
-            "float": (is_num, "a number"),
-            "bool": (lambda x: isinstance(x, bool), "true or false"),
-            "str": (lambda x: isinstance(x, str), "a string"),
-            "int | None": (lambda x: x is None or is_int(x), "an integer or null"),
-            "float | None": (lambda x: x is None or is_num(x), "a number or null"),
-            "tuple[int, ...]": (lambda x: isinstance(x, (list, tuple)) and all(is_int(v) for v in x),
-                                "a list of integers"),
-            "tuple[float, ...] | None": (lambda x: x is None or (isinstance(x, (list, tuple))
-                                                                and all(is_num(v) for v in x)),
-                                         "a list of numbers or null"),
-        }
-        for f in dataclasses.fields(self):
-            if f.type not in checks:
-                continue
-            ok, what = checks[f.type]
-            value = getattr(self, f.name)
-            if not ok(value):
-                raise ConfigError(f"{f.name}={value!r} is not {what}")
 
     # ------------------------------------------------------------------------------------------------------
     @property
@@ -163,9 +226,11 @@ class Config:
 
     @classmethod
     def for_algo(cls, algo: str, **overrides: Any) -> Config:
-        """Build the config of a named variant (``eql``, ``ee``, ``pe``, ``mope``) with overrides."""
-        if algo not in ALGOS:
-            raise ConfigError(f"unknown algorithm '{algo}'{suggest(algo, ALGOS)}; choose one of {', '.join(ALGOS)}")
+        """Build the config of a named variant (``eql``, ``ee``, ``pe``, ``mope``) with overrides.
+
+        This is the one place that maps a variant's name to its exploration switches.
+        """
+        check_algo(algo)
         ee, pe = ALGOS[algo]
         overrides.setdefault("experience_exploration", ee)
         overrides.setdefault("preference_exploration", pe)
@@ -174,85 +239,82 @@ class Config:
         return cls.from_dict(overrides)
 
     def replace(self, **changes: Any) -> Config:
-        """Return a copy with ``changes`` applied (validated)."""
+        """Return a copy with ``changes`` (flat keys, run settings included) applied (validated)."""
         return self.from_dict({**self.to_dict(), **changes})
+
+    def with_algo(self, algo: str) -> Config:
+        """The same settings under another variant (its exploration switches)."""
+        d = self.to_dict()
+        for key in ("algo", "experience_exploration", "preference_exploration"):
+            d.pop(key)
+        return Config.for_algo(algo, **d)
 
     # ------------------------------------------------------------------------------------------------------
     def validate(self) -> None:
-        """Raise :class:`ConfigError` naming the first out-of-range value."""
-
-        def need(ok: bool, name: str, allowed: str) -> None:
-            if not ok:
-                raise ConfigError(f"{name}={getattr(self, name)!r} is out of range: {allowed}")
-
-        def finite(x: float) -> bool:
-            return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-
-        need(isinstance(self.env_id, str) and bool(self.env_id), "env_id", "must be a non-empty string")
-        need(isinstance(self.seed, int) and self.seed >= 0, "seed", "must be an integer >= 0")
-        need(isinstance(self.total_steps, int) and self.total_steps >= 1, "total_steps", "must be >= 1")
-        need(self.device in DEVICES, "device", f"choose one of {', '.join(DEVICES)}")
-        need(self.obs_encoding in ("scale", "onehot"), "obs_encoding", "choose one of scale, onehot")
-        need(isinstance(self.torch_threads, int) and self.torch_threads >= 0, "torch_threads", "must be >= 0")
+        """Raise :class:`ConfigError` naming the first out-of-range hyperparameter."""
+        need = functools.partial(_need, self)
+        need(bool(self.env_id), "env_id", "must be a non-empty string")
+        need(self.seed >= 0, "seed", "must be an integer >= 0")
+        need(self.total_steps >= 1, "total_steps", "must be >= 1")
+        need(self.obs_encoding in ENCODINGS, "obs_encoding", f"choose one of {', '.join(ENCODINGS)}")
+        need(self.q_head in Q_HEADS, "q_head", f"choose one of {', '.join(Q_HEADS)}")
+        need(self.learning_rate_end is None or (_finite(self.learning_rate_end) and self.learning_rate_end > 0),
+             "learning_rate_end", "must be > 0 or None")
+        need(self.target_tau is None or (_finite(self.target_tau) and 0 < self.target_tau <= 1), "target_tau",
+             "must lie in (0, 1] or be None")
+        need(_finite(self.relabel_broad) and 0 <= self.relabel_broad <= 1, "relabel_broad", "must lie in [0, 1]")
         need(self.max_episode_steps is None or self.max_episode_steps >= 1, "max_episode_steps",
              "must be >= 1 or None")
-        need(finite(self.gamma) and 0.0 < self.gamma <= 1.0, "gamma", "must lie in (0, 1]")
-        need(len(self.hidden_sizes) >= 1 and all(h >= 1 for h in self.hidden_sizes), "hidden_sizes",
-             "must be one or more positive layer widths")
-        need(finite(self.learning_rate) and self.learning_rate > 0, "learning_rate", "must be > 0")
-        need(isinstance(self.batch_size, int) and self.batch_size >= 1, "batch_size", "must be >= 1")
-        need(isinstance(self.buffer_size, int) and self.buffer_size >= self.batch_size, "buffer_size",
-             f"must be >= batch_size ({self.batch_size})")
-        need(isinstance(self.learning_starts, int) and self.learning_starts >= 0, "learning_starts",
-             "must be >= 0")
-        need(isinstance(self.gradient_steps, int) and self.gradient_steps >= 1, "gradient_steps", "must be >= 1")
-        need(isinstance(self.target_update_freq, int) and self.target_update_freq >= 1, "target_update_freq",
-             "must be >= 1")
-        need(finite(self.lb_weight) and self.lb_weight >= 0, "lb_weight", "must be >= 0")
-        need(self.max_grad_norm is None or (finite(self.max_grad_norm) and self.max_grad_norm > 0),
+        need(_finite(self.gamma) and 0.0 < self.gamma <= 1.0, "gamma", "must lie in (0, 1]")
+        for name in ("hidden_sizes", "disc_hidden"):
+            need(len(getattr(self, name)) >= 1 and all(h >= 1 for h in getattr(self, name)), name,
+                 "must be one or more positive layer widths")
+        for name in ("learning_rate", "disc_learning_rate", "sigma_omega", "per_eps", "pe_count_offset"):
+            need(_finite(getattr(self, name)) and getattr(self, name) > 0, name, "must be > 0")
+        for name in ("batch_size", "gradient_steps", "target_update_freq", "epsilon_decay_steps", "n_omega",
+                     "n_intervals", "n_components"):
+            need(getattr(self, name) >= 1, name, "must be >= 1")
+        need(self.buffer_size >= self.batch_size, "buffer_size", f"must be >= batch_size ({self.batch_size})")
+        for name in ("learning_starts", "lb_homotopy_steps"):
+            need(getattr(self, name) >= 0, name, "must be >= 0")
+        for name in ("lb_weight", "per_alpha", "mi_alpha", "component_loss_weight"):
+            need(_finite(getattr(self, name)) and getattr(self, name) >= 0, name, "must be >= 0")
+        need(self.max_grad_norm is None or (_finite(self.max_grad_norm) and self.max_grad_norm > 0),
              "max_grad_norm", "must be > 0 or None")
-        for name in ("epsilon_start", "epsilon_end"):
-            need(finite(getattr(self, name)) and 0.0 <= getattr(self, name) <= 1.0, name, "must lie in [0, 1]")
-        need(isinstance(self.epsilon_decay_steps, int) and self.epsilon_decay_steps >= 1, "epsilon_decay_steps",
-             "must be >= 1")
-        need(isinstance(self.n_omega, int) and self.n_omega >= 1, "n_omega", "must be >= 1")
-        need(finite(self.per_alpha) and self.per_alpha >= 0, "per_alpha", "must be >= 0")
-        need(finite(self.per_beta_start) and 0 <= self.per_beta_start <= 1, "per_beta_start", "must lie in [0, 1]")
-        need(finite(self.per_eps) and self.per_eps > 0, "per_eps", "must be > 0")
-        need(finite(self.sigma_omega) and self.sigma_omega > 0, "sigma_omega", "must be > 0")
+        for name in ("epsilon_start", "epsilon_end", "per_beta_start"):
+            need(_finite(getattr(self, name)) and 0.0 <= getattr(self, name) <= 1.0, name, "must lie in [0, 1]")
         need(self.envelope_prefs in ENVELOPE_PREFS, "envelope_prefs", f"choose one of {', '.join(ENVELOPE_PREFS)}")
-        need(finite(self.mi_alpha) and self.mi_alpha >= 0, "mi_alpha", "must be >= 0")
-        need(len(self.disc_hidden) >= 1 and all(h >= 1 for h in self.disc_hidden), "disc_hidden",
-             "must be one or more positive layer widths")
-        need(finite(self.disc_learning_rate) and self.disc_learning_rate > 0, "disc_learning_rate", "must be > 0")
-        need(isinstance(self.n_intervals, int) and self.n_intervals >= 1, "n_intervals", "must be >= 1")
-        need(finite(self.pe_count_offset) and self.pe_count_offset > 0, "pe_count_offset", "must be > 0")
-        need(isinstance(self.eval_every, int) and self.eval_every >= 0, "eval_every", "must be >= 0 (0: never)")
-        need(isinstance(self.eval_prefs, int) and self.eval_prefs >= 1, "eval_prefs", "must be >= 1")
-        need(self.ref_point is None or all(math.isfinite(x) for x in self.ref_point), "ref_point",
-             "must be finite numbers")
-        need(isinstance(self.checkpoint_every, int) and self.checkpoint_every >= 0, "checkpoint_every",
-             "must be >= 0 (0: only at the end)")
 
     # ------------------------------------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
-        """Plain, JSON-safe dict of every field, plus the derived ``algo``."""
-        d = dataclasses.asdict(self)
+        """Plain, JSON-safe, flat dict of every setting (run settings included), plus the derived ``algo``."""
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "run"}
         d["hidden_sizes"] = list(self.hidden_sizes)
         d["disc_hidden"] = list(self.disc_hidden)
-        d["ref_point"] = None if self.ref_point is None else list(self.ref_point)
+        run = dataclasses.asdict(self.run)
+        run["ref_point"] = None if self.run.ref_point is None else list(self.run.ref_point)
+        d.update(run)
         d["algo"] = self.algo
         return d
 
     @classmethod
+    def hyperparameter_names(cls) -> list[str]:
+        """Names of the fields that change learning."""
+        return [f.name for f in dataclasses.fields(cls) if f.name != "run"]
+
+    @classmethod
     def field_names(cls) -> list[str]:
-        """Names of all settable fields."""
-        return [f.name for f in dataclasses.fields(cls)]
+        """Names of all settable flat keys: hyperparameters, then run settings."""
+        return [*cls.hyperparameter_names(), *RunSettings.field_names()]
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Config:
-        """Build from a dict (a saved config or overrides). ``algo`` sets the exploration switches."""
+        """Build from a flat dict (a saved config or overrides). ``algo`` sets the exploration switches.
+
+        ``extra`` (a field of older versions, always empty) is accepted and dropped.
+        """
         data = dict(data)
+        data.pop("extra", None)
         algo = data.pop("algo", None)
         names = cls.field_names()
         for key in data:
@@ -260,9 +322,9 @@ class Config:
                 raise unknown_key_error(key)
         if algo is not None:
             return cls.for_algo(algo, **data)
-        types = {f.name: f.type for f in dataclasses.fields(cls)}
+        types = {f.name: f.type for f in (*dataclasses.fields(cls), *dataclasses.fields(RunSettings))}
         for key, value in data.items():
-            # ints given as floats ("20000.0") and bools given as ints are user slips: coerce where lossless.
+            # ints given as floats ("20000.0") are user slips: coerce where lossless.
             if types[key] in ("int", "int | None") and isinstance(value, float) and value.is_integer():
                 data[key] = int(value)
         return cls(**data)
@@ -303,6 +365,13 @@ class Config:
         return cls.from_dict(data)
 
 
+def check_algo(algo: str) -> str:
+    """Return ``algo`` if it names a variant, else raise a :class:`ConfigError` with the closest name."""
+    if algo not in ALGOS:
+        raise ConfigError(f"unknown algorithm '{algo}'{suggest(algo, ALGOS)}; choose one of {', '.join(ALGOS)}")
+    return algo
+
+
 def unknown_key_error(key: str) -> ConfigError:
     """The error for a key that is not a :class:`Config` field, with the closest field name when one is close."""
     names = Config.field_names()
@@ -324,12 +393,21 @@ _dataclass_init = Config.__init__
 
 @functools.wraps(_dataclass_init)
 def _checked_init(self: Config, *args: Any, **kwargs: Any) -> None:
-    # Config(sigma_omgea=0.1) would otherwise fail with a TypeError from the generated __init__.
-    for key in kwargs:
-        if key not in _FIELD_NAMES:
+    # Config(sigma_omgea=0.1) would otherwise fail with a TypeError from the generated __init__; run settings
+    # given flat (Config(eval_prefs=100)) go into ``run``.
+    run_kwargs = {}
+    for key in list(kwargs):
+        if key in _RUN_NAMES:
+            run_kwargs[key] = kwargs.pop(key)
+        elif key not in _FIELD_NAMES:
             raise unknown_key_error(key)
+    if run_kwargs:
+        base = kwargs.get("run")
+        kwargs["run"] = RunSettings(**{**(dataclasses.asdict(base) if isinstance(base, RunSettings) else {}),
+                                       **run_kwargs})
     _dataclass_init(self, *args, **kwargs)
 
 
-_FIELD_NAMES = frozenset(Config.field_names())
+_FIELD_NAMES = frozenset([*Config.hyperparameter_names(), "run"])
+_RUN_NAMES = frozenset(RunSettings.field_names())
 Config.__init__ = _checked_init  # type: ignore[method-assign]

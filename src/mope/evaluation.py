@@ -12,7 +12,7 @@ expected utility (EUM). The metrics themselves live in :mod:`mope.metrics`.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 import gymnasium as gym
 import numpy as np
@@ -104,21 +104,33 @@ def solutions(agent: GreedyPolicy, env: gym.Env, prefs: np.ndarray, gamma: float
         if history is not None:
             history.append(obs.copy())
         if loops and running.size:
-            state = batch.state_index(running)
-            again = visited[running, state]
-            visited[running, state] = True
-            if again.any():  # a deterministic greedy episode back in a visited state loops to the time limit
-                done, left = running[again], max_steps - (t + 1)
-                returns[done] += left * batch.loop_reward
-                # sum of gamma^k for k = t+1 .. max_steps-1
-                discounted[done] += discount * (1 - gamma**left) / (1 - gamma) * batch.loop_reward if gamma < 1 \
-                    else left * batch.loop_reward
-                lengths[done] = max_steps
-                running = running[~again]
+            running = _close_loops(batch, running, visited, returns, discounted, lengths, max_steps - (t + 1),
+                                   discount, gamma)
         if running.size == 0:
             break
     observations = np.stack(history, axis=1) if history is not None else None
     return Solutions(prefs, returns, discounted, lengths, terminated, observations)
+
+
+def _close_loops(batch: Any, running: np.ndarray, visited: np.ndarray, returns: np.ndarray, discounted: np.ndarray,
+                 lengths: np.ndarray, left: int, discount: float, gamma: float) -> np.ndarray:
+    """End, in closed form, the running episodes back in a visited state; return the ones still running.
+
+    A deterministic greedy episode back in a state it visited loops until the time limit: its ``left``
+    remaining steps each give ``batch.loop_reward``, discounted from ``discount`` on.
+    """
+    state = batch.state_index(running)
+    again = visited[running, state]
+    visited[running, state] = True
+    if not again.any():
+        return running
+    done = running[again]
+    returns[done] += left * batch.loop_reward
+    # sum of gamma^k for k = t+1 .. max_steps-1
+    discounted[done] += discount * (1 - gamma**left) / (1 - gamma) * batch.loop_reward if gamma < 1 \
+        else left * batch.loop_reward
+    lengths[done] += left  # to the time limit
+    return running[~again]
 
 
 class Evaluator:
@@ -148,6 +160,21 @@ class Evaluator:
         self.close_loops = True
         self.ref_point = (np.asarray(ref_point, dtype=np.float64) if ref_point is not None
                           else default_ref_point(env, env_id, gamma, self.max_steps))
+
+    @classmethod
+    def from_config(cls, env: gym.Env, config: Any, n_prefs: int | None = None, seed: int | None = None
+                    ) -> Evaluator:
+        """The evaluator of a run: its environment, discount, preference count, seed, time limit and reference point.
+
+        Args:
+            env: An environment instance of the task.
+            config: The run's :class:`~mope.config.Config`.
+            n_prefs: Uniform preferences (default ``config.run.eval_prefs``).
+            seed: Seed of the preference set (default ``config.seed``).
+        """
+        c = config
+        return cls(env, c.env_id, c.gamma, c.run.eval_prefs if n_prefs is None else n_prefs,
+                   c.seed if seed is None else seed, c.max_episode_steps, c.run.ref_point)
 
     def evaluate(self, agent: GreedyPolicy, record_obs: bool = False) -> tuple[dict[str, float], Solutions]:
         """Roll out every preference greedily and compute the metrics.

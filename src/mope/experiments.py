@@ -5,6 +5,8 @@ A run folder written by :func:`train_run` (and ``mope train``) holds::
     config.json          the resolved Config (every field, plus the derived algo)
     metrics.csv          one row per evaluation: step, wall_s, cr, precision, recall, hv, eum, eum_optimal,
                          eum_gap, optimal_share, cardinality, timeout_share, loss, epsilon
+    train_stats.csv      every log_every steps: the mean of each update statistic over those steps (loss,
+                         loss_a, loss_b, td_abs, q_mean, q_max, mi_bonus, disc_loss) and epsilon
     solutions.csv        the final evaluation: preference, discounted and undiscounted return per preference
     summary.json         final metrics, wall time, seconds per 1k steps, versions
     tb/                  TensorBoard scalars (metrics and losses)
@@ -32,16 +34,22 @@ from typing import Any
 import numpy as np
 import torch
 
-from mope.agent import MoPE, TrainingDivergedError
+from mope.agent import MoPE, TrainingDivergedError, agent_class
 from mope.checkpoint import mope_version
 from mope.config import Config
 from mope.envs import make_env
 from mope.errors import CheckpointError, MopeError
 from mope.evaluation import Evaluator, Solutions, solutions
+from mope.locks import FolderLock
 from mope.metrics import EVALUATE_KEYS
 from mope.preferences import validate_preference
+from mope.runner import Callback, EvalCallback, IntervalStats, ProgressBar, StopWhen, train
 
 METRIC_COLUMNS = ["step", "wall_s", *EVALUATE_KEYS, "timeout_share", "loss", "epsilon"]
+#: Interval averages of the update statistics (``IntervalStats``), every ``log_every`` steps.
+TRAIN_STATS = "train_stats.csv"
+STATS_COLUMNS = ["step", "updates", "epsilon", "loss", "loss_a", "loss_b", "td_abs", "q_mean", "q_max", "mi_bonus",
+                 "disc_loss"]
 
 
 class RunFolderError(MopeError):
@@ -83,7 +91,7 @@ def prepare_out_dir(out_dir: str | Path, overwrite: bool = False) -> Path:
             f"output folder '{out}' already holds a run; choose another --out, pass --overwrite{hint}")
     try:
         if overwrite:  # nothing of the old run may pass for the new one's (status, report, resume)
-            for name in ("summary.json", "solutions.csv", "metrics.csv", "config.json", "error.txt"):
+            for name in ("summary.json", "solutions.csv", "metrics.csv", TRAIN_STATS, "config.json", "error.txt"):
                 (out / name).unlink(missing_ok=True)
             for old in (out / "checkpoints").glob("*.pt"):
                 old.unlink()
@@ -108,6 +116,15 @@ def write_solutions(path: str | Path, sols: Solutions) -> None:
         for row in zip(sols.prefs, sols.discounted, sols.returns, sols.lengths, sols.terminated, strict=True):
             w.writerow([*(f"{x:.6g}" for x in row[0]), *(f"{x:.6g}" for x in row[1]), *(f"{x:.6g}" for x in row[2]),
                         int(row[3]), int(row[4])])
+
+
+def read_csv_rows(path: str | Path) -> list[dict[str, float]]:
+    """Rows of a numeric CSV log as floats (``step`` as an int); no rows if the file does not exist."""
+    path = Path(path)
+    if not path.is_file():
+        return []
+    with open(path) as f:
+        return [{k: int(float(v)) if k == "step" else float(v) for k, v in row.items()} for row in csv.DictReader(f)]
 
 
 def read_metrics(run_dir: str | Path) -> list[dict[str, float]]:
@@ -136,6 +153,95 @@ def _finished_result(out: Path) -> RunResult:
     return RunResult(out, agent, read_metrics(out), summary.get("final", {}), float(summary.get("wall_s", 0.0)))
 
 
+def _resume_or_start(config: Config, out: Path, overwrite: bool, resume: bool) -> tuple[MoPE, list[dict], str]:
+    """The agent to train, the metrics rows to keep, and the run's status before this call."""
+    status = run_status(out) if resume else "new"
+    if status != "new":
+        saved = Config.load(out / "config.json")
+        differ = _same_run(saved, config)
+        if differ:
+            raise RunFolderError(
+                f"cannot resume '{out}': its config differs in {', '.join(differ)} "
+                f"(saved {', '.join(f'{k}={saved.to_dict()[k]!r}' for k in differ)})")
+    if status == "resumable":
+        agent = MoPE.load(out / "checkpoints" / RESUME_CHECKPOINT, device=config.run.device,
+                          torch_threads=config.run.torch_threads)
+        stale = _same_run(agent.config, config)
+        if stale:
+            raise RunFolderError(f"cannot resume '{out}': checkpoints/{RESUME_CHECKPOINT} was written by another "
+                                 f"config (it differs in {', '.join(stale)}); pass --overwrite to start again")
+        kept = [r for r in read_metrics(out) if r["step"] <= agent.global_step] if (out / "metrics.csv").is_file() \
+            else []
+        kept_stats = [r for r in read_csv_rows(out / TRAIN_STATS) if r["step"] <= agent.global_step]
+        return agent, [kept, kept_stats], status
+    # with resume, a folder that has nothing to resume from (killed before its first checkpoint) restarts
+    prepare_out_dir(out, overwrite or resume)
+    config.save(out / "config.json")
+    return agent_class(config.algo)(config.env_id, config), [[], []], status
+
+
+class _RunLogs:
+    """The run folder's logs: metrics.csv (one row per evaluation), train_stats.csv (interval averages of the
+    update statistics) and TensorBoard scalars of both."""
+
+    def __init__(self, out: Path, kept: list[dict], kept_stats: list[dict]) -> None:
+        from torch.utils.tensorboard import SummaryWriter
+
+        self.tb = SummaryWriter(str(out / "tb"))
+        self.metrics = _CsvLog(out / "metrics.csv", METRIC_COLUMNS, kept)
+        self.stats = _CsvLog(out / TRAIN_STATS, STATS_COLUMNS, kept_stats)
+
+    def on_record(self, agent: MoPE, rec: dict[str, float]) -> None:
+        rec.update(loss=agent.last_losses.get("loss", float("nan")), epsilon=agent.epsilon)
+        self.metrics.write(rec)
+        for k in METRIC_COLUMNS[2:]:
+            self.tb.add_scalar(f"eval/{k}", rec[k], agent.global_step)
+
+    def on_stats(self, row: dict[str, float]) -> None:
+        self.stats.write(row)
+        for k, v in row.items():
+            if k != "step":
+                self.tb.add_scalar(f"train/{k}", v, int(row["step"]))
+
+    def close(self) -> None:
+        self.metrics.close()
+        self.stats.close()
+        self.tb.close()
+
+
+class _CsvLog:
+    """A CSV file rewritten with the kept rows, then appended to and flushed row by row."""
+
+    def __init__(self, path: Path, columns: list[str], kept: list[dict]) -> None:
+        self.file = open(path, "w", newline="")  # noqa: SIM115 - closed by close()
+        self.writer = csv.DictWriter(self.file, fieldnames=columns, extrasaction="ignore")
+        self.columns = columns
+        self.writer.writeheader()
+        for row in kept:
+            self.write(row)
+
+    def write(self, row: dict[str, float]) -> None:
+        self.writer.writerow({k: row.get(k, float("nan")) for k in self.columns})
+        self.file.flush()
+
+    def close(self) -> None:
+        self.file.close()
+
+
+class _Checkpoints(Callback):
+    """Every ``every`` steps: checkpoints/resume.pt (the whole state), then step_N.pt (weights)."""
+
+    def __init__(self, out: Path, every: int) -> None:
+        self.out, self.every = out, every
+
+    def on_step(self, agent: MoPE, stats: dict[str, float] | None) -> bool:
+        if self.every and agent.global_step % self.every == 0:
+            # resume.pt first: once step_N.pt is there, the resumable state of step N is too
+            agent.save(self.out / "checkpoints" / RESUME_CHECKPOINT, include_buffer=True)
+            agent.save(self.out / "checkpoints" / f"step_{agent.global_step}.pt")
+        return True
+
+
 def train_run(config: Config, out_dir: str | Path, progress: bool = True, overwrite: bool = False,
               resume: bool = False) -> RunResult:
     """Train one agent and write a complete run folder (see the module docstring).
@@ -146,64 +252,34 @@ def train_run(config: Config, out_dir: str | Path, progress: bool = True, overwr
         progress: Show a progress bar.
         overwrite: Replace a run already in ``out_dir``.
         resume: Continue the run in ``out_dir`` from ``checkpoints/resume.pt``; return a finished run as it is;
-            start a new run if there is nothing to resume.
+            start the run over if there is nothing to resume (a run killed before its first checkpoint).
 
+    The folder is locked while the run writes it (:class:`~mope.locks.FolderLock`): a second writer is refused.
     Ctrl-C (SIGINT) or SIGTERM stops training at the next step boundary, saves ``checkpoints/resume.pt``
     (the whole training state) and raises ``KeyboardInterrupt``; no finished evaluation or trained weights are
     lost. A NaN or inf raises :class:`~mope.agent.TrainingDivergedError` naming the step and the quantity and
     leaves the last good checkpoints untouched.
     """
-    from torch.utils.tensorboard import SummaryWriter
-
     out = Path(out_dir)
-    status = run_status(out) if resume else "new"
-    if status != "new":
-        saved = Config.load(out / "config.json")
-        differ = _same_run(saved, config)
-        if differ:
-            raise RunFolderError(
-                f"cannot resume '{out}': its config differs in {', '.join(differ)} "
-                f"(saved {', '.join(f'{k}={saved.to_dict()[k]!r}' for k in differ)})")
-    if status == "finished":
-        return _finished_result(out)
-    if status == "resumable":
-        agent = MoPE.load(out / "checkpoints" / RESUME_CHECKPOINT, device=config.device,
-                          torch_threads=config.torch_threads)
-        stale = _same_run(agent.config, config)
-        if stale:
-            raise RunFolderError(f"cannot resume '{out}': checkpoints/{RESUME_CHECKPOINT} was written by another "
-                                 f"config (it differs in {', '.join(stale)}); pass --overwrite to start again")
-        kept = [r for r in read_metrics(out) if r["step"] <= agent.global_step] if (out / "metrics.csv").is_file() \
-            else []
-    else:  # with resume, a folder that has nothing to resume from (killed before its first checkpoint) restarts
-        out = prepare_out_dir(out_dir, overwrite or resume)
-        config.save(out / "config.json")
-        agent = MoPE(config.env_id, config)
-        kept = []
+    with FolderLock(out, what="run folder"):
+        if resume and run_status(out) == "finished":
+            saved = Config.load(out / "config.json")
+            differ = _same_run(saved, config)
+            if differ:
+                raise RunFolderError(f"cannot resume '{out}': its config differs in {', '.join(differ)}")
+            return _finished_result(out)
+        agent, (kept, kept_stats), status = _resume_or_start(config, out, overwrite, resume)
+        records = _train_logged(agent, config, out, kept, kept_stats, progress)
+        return _finish_run(agent, config, out, kept + records, status)
+
+
+def _train_logged(agent: MoPE, config: Config, out: Path, kept: list[dict], kept_stats: list[dict],
+                  progress: bool) -> list[dict[str, float]]:
+    """Train the rest of the run with evaluation, logs, checkpoints and signal handling as callbacks."""
     eval_env = make_env(config.env_id, config.max_episode_steps)
-    writer = SummaryWriter(str(out / "tb"))
-    metrics_file = open(out / "metrics.csv", "w", newline="")  # noqa: SIM115 - closed in finally
-    csv_writer = csv.DictWriter(metrics_file, fieldnames=METRIC_COLUMNS, extrasaction="ignore")
-    csv_writer.writeheader()
-    for row in kept:
-        csv_writer.writerow({k: row.get(k, float("nan")) for k in METRIC_COLUMNS})
-    metrics_file.flush()
-
-    def on_eval(ag: MoPE, rec: dict[str, float]) -> None:
-        rec.update(loss=ag.last_losses.get("loss", float("nan")), epsilon=ag.epsilon)
-        csv_writer.writerow({k: rec.get(k, float("nan")) for k in METRIC_COLUMNS})
-        metrics_file.flush()
-        for k in METRIC_COLUMNS[2:]:
-            writer.add_scalar(f"eval/{k}", rec[k], ag.global_step)
-        for k, v in ag.last_losses.items():
-            writer.add_scalar(f"train/{k}", v, ag.global_step)
-
-    def on_step(ag: MoPE) -> None:
-        if config.checkpoint_every and ag.global_step % config.checkpoint_every == 0:
-            # resume.pt first: once step_N.pt is there, the resumable state of step N is too
-            ag.save(out / "checkpoints" / RESUME_CHECKPOINT, include_buffer=True)
-            ag.save(out / "checkpoints" / f"step_{ag.global_step}.pt")
-
+    logs = _RunLogs(out, kept, kept_stats)
+    evaluator = Evaluator.from_config(eval_env, config)
+    evaluating = EvalCallback(evaluator, config.run.eval_every, on_record=logs.on_record)
     # SIGINT/SIGTERM set a flag that the training loop polls at each step boundary, so the interruption never
     # lands inside torch, the CSV writer or TensorBoard's writer thread.
     received: list[int] = []
@@ -211,16 +287,16 @@ def train_run(config: Config, out_dir: str | Path, progress: bool = True, overwr
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGINT, signal.SIGTERM):
             handlers[sig] = signal.signal(sig, lambda signum, frame: received.append(signum))
+    callbacks: list[Callback] = [evaluating, _Checkpoints(out, config.run.checkpoint_every),
+                                 IntervalStats(config.run.log_every, logs.on_stats), StopWhen(lambda: bool(received))]
+    if progress:
+        callbacks.insert(0, ProgressBar(evaluating))
     remaining = config.total_steps - agent.global_step
     try:
         if remaining > 0:
-            records = agent.train(remaining, eval_env=eval_env, callback=on_eval, progress=progress,
-                                  stop=lambda: bool(received), on_step=on_step)
+            train(agent, remaining, callbacks)
         else:  # resumed at the last step: evaluate once more for the final solutions (deterministic)
-            records = []
-            c = config
-            _, agent.last_solutions = Evaluator(eval_env, c.env_id, c.gamma, c.eval_prefs, c.seed,
-                                                c.max_episode_steps, c.ref_point).evaluate(agent)
+            _, agent.last_solutions = evaluator.evaluate(agent)
     except TrainingDivergedError as exc:
         last = out / "checkpoints" / RESUME_CHECKPOINT
         where = f"the last good checkpoint is '{last}'" if last.is_file() else "no checkpoint was written before it"
@@ -228,14 +304,17 @@ def train_run(config: Config, out_dir: str | Path, progress: bool = True, overwr
     finally:
         for sig, old_handler in handlers.items():
             signal.signal(sig, old_handler)
-        metrics_file.close()
-        writer.close()
+        logs.close()
         eval_env.close()
     if received:
         agent.save(out / "checkpoints" / RESUME_CHECKPOINT, include_buffer=True)
         raise KeyboardInterrupt(f"stopped by signal {received[0]} at step {agent.global_step}")
+    return evaluating.records
+
+
+def _finish_run(agent: MoPE, config: Config, out: Path, all_records: list[dict], status: str) -> RunResult:
+    """Write final.pt, solutions.csv and summary.json."""
     agent.save(out / "checkpoints" / "final.pt")
-    all_records = kept + records
     final = all_records[-1] if all_records else {}
     if agent.last_solutions is not None:
         write_solutions(out / "solutions.csv", agent.last_solutions)  # the final evaluation's solutions
@@ -244,12 +323,6 @@ def train_run(config: Config, out_dir: str | Path, progress: bool = True, overwr
                "versions": _environment_info()}
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return RunResult(out, agent, all_records, final, agent.wall_s)
-
-
-def run_worker(config_dict: dict[str, Any], out_dir: str) -> str:
-    """Process-pool worker of the reproductions: train one run to the end, resuming or reusing what is there."""
-    train_run(Config.from_dict(config_dict), out_dir, progress=False, resume=True)
-    return out_dir
 
 
 def resolve_checkpoint(path: str | Path) -> Path:
@@ -280,8 +353,7 @@ def evaluate_checkpoint(path: str | Path, n_prefs: int = 2000, seed: int | None 
         raise MopeError(f"--prefs {n_prefs} is out of range: must be >= 1")
     agent = load_agent(path, device)
     c = agent.config
-    evaluator = Evaluator(agent.env, c.env_id, c.gamma, n_prefs, c.seed if seed is None else seed,
-                          c.max_episode_steps, c.ref_point)
+    evaluator = Evaluator.from_config(agent.env, c, n_prefs, seed)
     res, sols = evaluator.evaluate(agent)
     if out is not None:
         Path(out).parent.mkdir(parents=True, exist_ok=True)

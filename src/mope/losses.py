@@ -1,55 +1,65 @@
-"""The equations of the paper, one small function each, as batched tensor operations.
+"""The equations of the paper, one small function each, as pure batched tensor operations.
 
 Shapes: ``B`` transitions, ``N`` relabeled preferences per transition, ``K`` envelope preferences per
-transition, ``A`` actions, ``m`` objectives. Nothing here loops over preferences or samples in Python.
+transition, ``A`` actions, ``m`` objectives. Nothing here runs a network or loops over preferences or samples
+in Python: the agent passes in the Q tensors it computed.
 """
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 
-from mope.networks import QNetwork
+
+def envelope_set(mode: str, row_prefs: torch.Tensor, acting_prefs: torch.Tensor) -> tuple[torch.Tensor, bool]:
+    """The preferences the envelope max of eq. 4 runs over, ``(B, K, m)``, and whether it is an envelope at all.
+
+    Args:
+        mode: ``relabel`` (the transition's own relabeled set), ``batch`` (the acting preferences of the whole
+            batch), ``both``, or ``own`` (no envelope: each row maxes over actions at its own preference).
+        row_prefs: ``(B, N, m)`` preferences of the training rows.
+        acting_prefs: ``(B, m)`` the preferences the transitions were collected under.
+
+    Returns:
+        ``(prefs, envelope)``; with ``own`` the set is ``row_prefs`` and ``envelope`` is False.
+    """
+    if mode in ("relabel", "own"):
+        return row_prefs, mode != "own"
+    batch = acting_prefs.unsqueeze(0).expand(acting_prefs.shape[0], -1, -1)
+    return (batch if mode == "batch" else torch.cat([row_prefs, batch], dim=1)), True
 
 
-def envelope_target(target_net: QNetwork, next_feats: torch.Tensor, rewards: torch.Tensor,
-                    terminated: torch.Tensor, row_prefs: torch.Tensor, envelope_prefs: torch.Tensor,
-                    gamma: float, select_net: QNetwork | None = None, envelope: bool = True) -> torch.Tensor:
+def envelope_target(q_next: torch.Tensor, rewards: torch.Tensor, terminated: torch.Tensor, row_prefs: torch.Tensor,
+                    gamma: float, q_select: torch.Tensor | None = None, envelope: bool = True) -> torch.Tensor:
     """Envelope target y of eq. 4 (Yang et al. 2019).
 
     For row ``(b, i)`` with preference ``w = row_prefs[b, i]``::
 
-        (a*, w'*) = argmax_{a, w' in envelope_prefs[b]}  w^T Q_target(s'_b, a, w')
-        y         = r_b + gamma * (1 - terminated_b) * Q_target(s'_b, a*, w'*)
+        (a*, k*) = argmax_{a, k}  w^T Q_select(s'_b, a, w'_k)
+        y        = r_b + gamma * (1 - terminated_b) * Q_next(s'_b, a*, w'_k*)
 
-    ``Q_target(s'_b, ., w')`` is computed once per (transition, envelope preference): a single forward pass
-    over ``B * K`` rows. Each of the ``N`` row preferences then only rescalarises those values, so the cost is
-    never ``B * N * K`` network rows.
+    ``Q(s'_b, ., w'_k)`` is computed once per (transition, envelope preference) by the caller; each of the ``N``
+    row preferences only rescalarises those values, so the cost is never ``B * N * K`` network rows.
 
-    With ``select_net`` (double Q-learning, van Hasselt et al. 2016), the argmax is taken on ``select_net`` (the
-    online network) and the value read from ``target_net``; this curbs the overestimation that a max over
+    With ``q_select`` from the online network (double Q-learning, van Hasselt et al. 2016), the argmax is taken
+    on it and the value read from ``q_next`` (the target network); this curbs the overestimation that a max over
     ``K * A`` noisy estimates otherwise feeds back through looping states.
 
     Args:
-        target_net: The target Q-network.
-        next_feats: ``(B, d)`` encoded next observations.
+        q_next: ``(B, K, A, m)`` target-network Q-values at s' for the K envelope preferences.
         rewards: ``(B, m)`` vector rewards.
         terminated: ``(B,)`` 1.0 where s' is terminal (truncation is not termination).
         row_prefs: ``(B, N, m)`` preferences of the training rows.
-        envelope_prefs: ``(B, K, m)`` preferences the max runs over.
         gamma: Discount factor.
-        select_net: Optional network for the argmax (double Q-learning).
+        q_select: Optional ``(B, K, A, m)`` Q-values for the argmax (double Q-learning).
         envelope: If False (an ablation, morl-baselines' ``envelope=False``), row ``(b, i)`` maxes over actions
-            at its own preference only; ``envelope_prefs`` must then be ``row_prefs`` (``K = N``).
+            at its own preference only; the envelope preferences must then be the row preferences (``K = N``).
 
     Returns:
         ``(B, N, m)`` targets.
     """
-    b, k, m = envelope_prefs.shape
-    feats = next_feats.unsqueeze(1).expand(b, k, next_feats.shape[1]).reshape(b * k, -1)
-    flat_prefs = envelope_prefs.reshape(b * k, m)
-    q_next = target_net.forward_features(feats, flat_prefs).view(b, k, -1, m)  # (B, K, A, m)
-    q_sel = q_next if select_net is None else select_net.forward_features(feats, flat_prefs).view(b, k, -1, m)
-    a = q_next.shape[2]
+    q_sel = q_next if q_select is None else q_select
+    b, k, a, m = q_next.shape
     if not envelope:
         best_a = torch.einsum("bim,biam->bia", row_prefs, q_sel).argmax(dim=2)  # (B, N)
         q_star = torch.gather(q_next, 2, best_a.view(b, k, 1, 1).expand(b, k, 1, m)).squeeze(2)
@@ -59,6 +69,17 @@ def envelope_target(target_net: QNetwork, next_feats: torch.Tensor, rewards: tor
     q_flat = q_next.reshape(b, k * a, m)
     q_star = torch.gather(q_flat, 1, best.unsqueeze(-1).expand(-1, -1, m))  # (B, N, m)
     return rewards.unsqueeze(1) + gamma * (1.0 - terminated).view(b, 1, 1) * q_star
+
+
+def clip_targets(y: torch.Tensor, low: torch.Tensor, high: torch.Tensor) -> torch.Tensor:
+    """Clamp targets to the per-objective range of returns the reward bounds allow (not in the paper)."""
+    return torch.maximum(torch.minimum(y, high), low)
+
+
+def taken_action_q(q_all: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+    """``Q(s, a, w)`` of the taken action: ``(B, N, A, m)`` and ``(B,)`` actions -> ``(B, N, m)``."""
+    b, n, _, m = q_all.shape
+    return q_all.gather(2, actions.view(b, 1, 1, 1).expand(b, n, 1, m)).squeeze(2)
 
 
 def eql_loss(q: torch.Tensor, y: torch.Tensor, prefs: torch.Tensor, lb_weight: float = 1.0
@@ -83,6 +104,24 @@ def eql_loss(q: torch.Tensor, y: torch.Tensor, prefs: torch.Tensor, lb_weight: f
     return l_a + lb_weight * l_b, l_a, l_b
 
 
+def component_loss(components: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    """Convex head (not in the paper): each target also pulls the return vector nearest to it.
+
+    ``min_c ||y_i - v_c(s, a)||^2``, averaged over the transition's N targets. The component a preference
+    selects is trained through eq. 4; this term lets the other components settle on the other targets, so the
+    C vectors spread over the distinct returns reachable from (s, a).
+
+    Args:
+        components: ``(B, C, m)`` the return vectors of the taken action.
+        y: ``(B, N, m)`` targets (no gradient).
+
+    Returns:
+        ``(B,)`` per-transition losses.
+    """
+    dist = (components.unsqueeze(1) - y.unsqueeze(2)).pow(2).sum(-1)  # (B, N, C)
+    return dist.min(dim=2).values.mean(dim=1)
+
+
 def preference_interval_td(q: torch.Tensor, y: torch.Tensor, prefs: torch.Tensor) -> torch.Tensor:
     """Preference-interval TD error of eq. 5: ``delta = 1/N sum_i (w_i^T y - w_i^T Q(s, a, w_i))``.
 
@@ -100,17 +139,20 @@ def mutual_information_bonus(log_q: torch.Tensor, log_p: torch.Tensor) -> torch.
     return log_q - log_p
 
 
-def priority(td: torch.Tensor, mi_bonus: torch.Tensor | None, alpha: float, eps: float) -> torch.Tensor:
-    """Replay priority of eq. 7, made a valid positive PER priority.
+def priority(td: torch.Tensor, mi_bonus: torch.Tensor | None, alpha: float, eps: float,
+             per_alpha: float = 1.0) -> np.ndarray:
+    """Replay priority of eq. 7, made a valid positive PER priority, raised to the PER exponent.
 
     ``q(s_i) = |delta| + alpha * (log q_phi(w|s) - log p(w))``. eq. 7 can be negative (a state whose preference
     the discriminator finds unlikely); it is clipped at 0, then ``eps`` is added so every transition keeps a
-    chance to be replayed. Without a discriminator (EQL, PE) the priority is ``|delta| + eps``.
+    chance to be replayed, and the result is raised to ``per_alpha`` (Schaul et al. 2016). Without a
+    discriminator (EQL, PE) the priority is ``(|delta| + eps) ** per_alpha``.
 
     Returns:
-        ``(B,)`` priorities before the PER exponent.
+        ``(B,)`` priorities as stored in the (numpy) sum tree; the exponent is applied in numpy, the sum tree's
+        own arithmetic.
     """
     p = td.abs()
     if mi_bonus is not None:
         p = p + alpha * mi_bonus
-    return p.clamp_min(0.0) + eps
+    return (p.clamp_min(0.0) + eps).detach().cpu().numpy() ** per_alpha

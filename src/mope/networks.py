@@ -20,7 +20,22 @@ from torch import nn
 
 from mope.errors import EnvironmentError_
 
-ENCODINGS = ("scale", "onehot")
+ENCODINGS = ("scale", "onehot", "auto")
+#: "auto" one-hot encodes an integer Box whose coordinates take at most this many values in all.
+AUTO_ONEHOT_MAX = 1024
+
+
+def resolve_encoding(space: gym.Space, encoding: str) -> str:
+    """``auto`` -> ``onehot`` for a small integer ``Box`` (at most AUTO_ONEHOT_MAX values over all coordinates),
+    else ``scale``; other encodings are returned as they are."""
+    if encoding != "auto":
+        return encoding
+    if isinstance(space, gym.spaces.Box) and np.issubdtype(space.dtype, np.integer) \
+            and np.all(np.isfinite(space.low)) and np.all(np.isfinite(space.high)):
+        sizes = np.asarray(space.high, dtype=np.int64) - np.asarray(space.low, dtype=np.int64) + 1
+        if sizes.sum() <= AUTO_ONEHOT_MAX:
+            return "onehot"
+    return "scale"
 
 
 class ObsEncoder(nn.Module):
@@ -33,6 +48,9 @@ class ObsEncoder(nn.Module):
 
     def __init__(self, space: gym.Space, encoding: str = "scale") -> None:
         super().__init__()
+        if encoding not in ENCODINGS:
+            raise EnvironmentError_(f"obs_encoding '{encoding}' is unknown; choose one of {', '.join(ENCODINGS)}")
+        encoding = resolve_encoding(space, encoding)
         if encoding not in ENCODINGS:
             raise EnvironmentError_(f"obs_encoding '{encoding}' is unknown; choose one of {', '.join(ENCODINGS)}")
         if (encoding == "onehot" and isinstance(space, gym.spaces.Box)
@@ -126,6 +144,87 @@ class QNetwork(nn.Module):
     def forward_features(self, feats: torch.Tensor, pref: torch.Tensor) -> torch.Tensor:
         """Same as :meth:`forward` for already encoded observations (lets a batch encode once)."""
         return self.net(torch.cat([feats, pref], dim=1)).view(-1, self.n_actions, self.n_objectives)
+
+    def forward_prefs(self, obs: torch.Tensor, prefs: torch.Tensor) -> torch.Tensor:
+        """Q-values of each observation under several preferences, in one pass of ``B * K`` rows.
+
+        Args:
+            obs: ``(B, ...)`` raw observations.
+            prefs: ``(B, K, m)`` preferences, K per observation.
+
+        Returns:
+            ``(B, K, |A|, m)`` vector Q-values.
+        """
+        b, k, m = prefs.shape
+        feats = self.encoder(obs)
+        rows = feats.unsqueeze(1).expand(b, k, feats.shape[1]).reshape(b * k, -1)
+        return self.forward_features(rows, prefs.reshape(b * k, m)).view(b, k, self.n_actions, m)
+
+
+class ConvexQNetwork(nn.Module):
+    """Q(s, a, omega) as the upper envelope of C learned return vectors per action (not in the paper).
+
+    For every state the network outputs C vectors ``v_c(s, a)`` in R^m per action (it does not see omega). Under a
+    preference omega, action a's Q-vector is the component that omega prefers::
+
+        c*(s, a, omega) = argmax_c omega^T v_c(s, a)        Q(s, a, omega) = v_{c*}(s, a)
+
+    so ``omega^T Q(s, a, omega) = max_c omega^T v_c(s, a)`` is convex and piecewise linear in omega, exactly the
+    shape of the true ``omega^T Q*(s, a, omega)`` for linear utilities (the maximum over the policies' value
+    vectors). A conditioned network has to fit the jumps of ``Q*(s, a, .)`` at the preferences where the best
+    continuation changes, and smooths them; here they are exact, and only the vectors have to be learned: one
+    constant target per component. With C at least the number of convex-coverage-set points reachable from
+    (s, a), the envelope max of eq. 4 over *every* preference is the max over components. The component of a
+    target is trained by :func:`mope.losses.component_loss` as well as through ``Q``.
+
+    Args:
+        obs_space: The environment's observation space.
+        n_actions: |A|.
+        n_objectives: m.
+        hidden: Hidden layer widths.
+        obs_encoding: See :class:`ObsEncoder`.
+        n_components: C, vectors per action.
+    """
+
+    def __init__(self, obs_space: gym.Space, n_actions: int, n_objectives: int,
+                 hidden: Sequence[int] = (256, 256, 256), obs_encoding: str = "scale", n_components: int = 12) -> None:
+        super().__init__()
+        self.encoder = ObsEncoder(obs_space, obs_encoding)
+        self.n_actions = n_actions
+        self.n_objectives = n_objectives
+        self.n_components = n_components
+        self.net = mlp(self.encoder.out_dim, hidden, n_actions * n_components * n_objectives)
+
+    def components(self, obs: torch.Tensor) -> torch.Tensor:
+        """``(B, |A|, C, m)`` the return vectors of raw observations ``(B, ...)``."""
+        return self.net(self.encoder(obs)).view(-1, self.n_actions, self.n_components, self.n_objectives)
+
+    @staticmethod
+    def select(v: torch.Tensor, prefs: torch.Tensor) -> torch.Tensor:
+        """The preferred component of each action: ``v (B, A, C, m)``, ``prefs (B, K, m)`` -> ``(B, K, A, m)``."""
+        b, a, c, m = v.shape
+        k = prefs.shape[1]
+        best = torch.einsum("bkm,bacm->bkac", prefs, v).argmax(dim=3)  # (B, K, A)
+        return v.unsqueeze(1).expand(b, k, a, c, m).gather(3, best[..., None, None].expand(b, k, a, 1, m)).squeeze(3)
+
+    def forward(self, obs: torch.Tensor, pref: torch.Tensor) -> torch.Tensor:
+        """``(R, |A|, m)`` Q-vectors of ``R`` observations, each under its own preference ``(R, m)``."""
+        return self.select(self.components(obs), pref.unsqueeze(1)).squeeze(1)
+
+    def forward_prefs(self, obs: torch.Tensor, prefs: torch.Tensor) -> torch.Tensor:
+        """``(B, K, |A|, m)`` Q-vectors of each observation under K preferences; one network pass of ``B`` rows."""
+        return self.select(self.components(obs), prefs)
+
+
+Q_HEADS = ("conditioned", "convex")
+
+
+def make_q_network(obs_space: gym.Space, n_actions: int, n_objectives: int, hidden: Sequence[int],
+                   obs_encoding: str, head: str = "conditioned", n_components: int = 12) -> nn.Module:
+    """The Q-network of a config: :class:`QNetwork` (``conditioned``, the paper's) or :class:`ConvexQNetwork`."""
+    if head == "convex":
+        return ConvexQNetwork(obs_space, n_actions, n_objectives, hidden, obs_encoding, n_components)
+    return QNetwork(obs_space, n_actions, n_objectives, hidden, obs_encoding)
 
 
 class Discriminator(nn.Module):

@@ -447,6 +447,12 @@ def report(runs_dir: str | Path, out_dir: str | Path | None = None, metrics: Seq
         notes.append(f"runs end at different steps ({', '.join(map(str, sorted(steps)))})")
 
     out = Path(out_dir) if out_dir is not None else root / "report"
+    return _write_report(root, out, runs, groups, shown, notes, n_boot, seed, plots)
+
+
+def _write_report(root: Path, out: Path, runs: Sequence[Run], groups: Sequence[Group], shown: list[str],
+                  notes: list[str], n_boot: int, seed: int, plots: bool) -> ReportResult:
+    """Write report.md, report.json and (with ``plots``) curves.png and fronts.png."""
     out.mkdir(parents=True, exist_ok=True)
     table = render_table(groups, shown)
     files = {"report.md": out / "report.md", "report.json": out / "report.json"}

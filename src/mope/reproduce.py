@@ -1,7 +1,8 @@
 """``mope reproduce dst``: the paper's Deep-Sea-Treasure experiment (Fig. 2, Fig. 3) over several seeds.
 
 Trains the four variants (``eql``, ``ee``, ``pe``, ``mope``) for the same number of steps and seeds, each
-into its own run folder (a finished run is reused, so an interrupted reproduction resumes where it stopped),
+into its own run folder ``<algo>-s<seed>`` through the job runner (a finished run is reused and an interrupted
+one resumes from its last checkpoint),
 then writes into the output folder:
 
 * ``fig2a_cr.png`` -- CR against steps, mean and 95% confidence band per variant;
@@ -17,32 +18,22 @@ from __future__ import annotations
 
 import json
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from mope.config import ALGOS, Config
-from mope.errors import ConfigError
-from mope.experiments import run_worker
+from mope.config import Config, check_algo
+from mope.errors import ConfigError, MopeError
+from mope.jobs import Job, run_jobs
+from mope.locks import FolderLock
 
 DST = "deep-sea-treasure-v0"
+CURVES = ("cr", "optimal_share", "timeout_share")
+FINAL_KEYS = ("cr", "hv", "eum", "eum_optimal", "eum_gap", "optimal_share", "timeout_share")
 
 
-
-
-def run_trials(configs: dict[str, Config], out: Path, workers: int, progress: bool = True) -> None:
-    """Run every config into ``out/<name>`` with a local process pool and a progress bar."""
-    from tqdm.auto import tqdm
-
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = {pool.submit(run_worker, cfg.to_dict(), str(out / name)): name for name, cfg in configs.items()}
-        with tqdm(total=len(futures), desc="trials", disable=not progress, unit="run") as bar:
-            for fut in as_completed(futures):
-                fut.result()
-                bar.update(1)
-                bar.set_postfix_str(futures[fut])
 
 
 def steps_to_full_coverage(rows: list[dict[str, float]]) -> float:
@@ -79,7 +70,7 @@ def analyse_run(run_dir: Path, n_prefs: int) -> dict[str, Any]:
 
     agent = MoPE.load(run_dir / "checkpoints" / "final.pt")
     c = agent.config
-    ev = Evaluator(agent.env, c.env_id, c.gamma, n_prefs, c.seed, c.max_episode_steps, c.ref_point)
+    ev = Evaluator.from_config(agent.env, c, n_prefs)
     res, sols = ev.evaluate(agent, record_obs=True)
     ccs = convex_coverage_set(ev.front)
     best = ccs[np.argmax(sols.prefs @ ccs.T, axis=1)]
@@ -90,59 +81,57 @@ def analyse_run(run_dir: Path, n_prefs: int) -> dict[str, Any]:
             "disc_map": discriminator_map(agent), "sea_map": np.asarray(agent.env.unwrapped.sea_map)}
 
 
-def reproduce_dst(out: str | Path, seeds: int = 3, steps: int = 20_000, eval_every: int = 1000,
-                  algos: tuple[str, ...] = ("eql", "ee", "pe", "mope"), workers: int = 2, progress: bool = True,
-                  **overrides: Any) -> dict[str, Any]:
-    """Train, evaluate and plot the DST experiment; see the module docstring for the outputs."""
+def dst_jobs(seeds: int, steps: int, eval_every: int, algos: Sequence[str], env_id: str = DST,
+             **overrides: Any) -> list[Job]:
+    """Validate the arguments and build one training job per (seed, variant), seed-major.
+
+    Seed-major: every variant's seed 0 comes before any seed 1, so a stopped reproduction can be analysed with
+    fewer seeds (re-run with a smaller ``--seeds``; finished runs are reused).
+    """
+    for a in algos:
+        check_algo(a)
+    if seeds < 1 or steps < 1:
+        raise ConfigError(f"seeds={seeds} and steps={steps} must both be >= 1")
+    return [Job(run_name(a, s), "train", Config.for_algo(a, env_id=env_id, seed=s, total_steps=steps,
+                                                         eval_every=eval_every, **overrides).to_dict())
+            for s in range(seeds) for a in algos]
+
+
+def run_name(algo: str, seed: int) -> str:
+    """Folder of one run of a reproduction: ``<algo>-s<seed>``."""
+    return f"{algo}-s{seed}"
+
+
+def summarise_variant(out: Path, algo: str, seeds: int, n_prefs: int) -> tuple[dict[str, Any], dict[str, Any], dict]:
+    """Final evaluation of every seed of one variant: its results entry, its seed-0 analysis and its curves."""
     from mope.experiments import read_metrics
-    from mope.plots import (
-        markdown_table,
-        plot_curves,
-        plot_discriminator_maps,
-        plot_fronts,
-        plot_preference_solutions,
-    )
 
-    for a in algos:
-        if a not in ALGOS:
-            raise ConfigError(f"unknown algorithm '{a}'; choose from {', '.join(ALGOS)}")
-    if seeds < 1 or steps < 1 or workers < 1:
-        raise ConfigError(f"seeds={seeds}, steps={steps} and workers={workers} must all be >= 1")
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    # seed-major order: every variant's seed 0 finishes before any seed 1, so a stopped reproduction can be
-    # analysed with fewer seeds (re-run with a smaller --seeds; finished runs are reused)
-    configs = {f"{a}/seed_{s}": Config.for_algo(a, env_id=DST, seed=s, total_steps=steps, eval_every=eval_every,
-                                                **overrides)
-               for s in range(seeds) for a in algos}
-    t0 = time.perf_counter()
-    run_trials(configs, out, workers, progress)
-    train_wall = time.perf_counter() - t0
+    metric_rows = [read_metrics(out / run_name(algo, s)) for s in range(seeds)]
+    n = min(len(r) for r in metric_rows)
+    step_axis = np.array([r["step"] for r in metric_rows[0][:n]])
+    curves = {key: (step_axis, np.array([[r[key] for r in rows[:n]] for rows in metric_rows]))
+              for key in CURVES}
+    runs = [analyse_run(out / run_name(algo, s), n_prefs) for s in range(seeds)]
+    fin = {k: np.array([r["metrics"][k] for r in runs]) for k in FINAL_KEYS}
+    t_full = np.array([steps_to_full_coverage(rows) for rows in metric_rows])
+    result = {
+        **{k: {"mean": float(v.mean()), "std": float(v.std()), "values": v.tolist()} for k, v in fin.items()},
+        "steps_to_cr1": {"median": float(np.nanmedian(t_full)) if np.any(~np.isnan(t_full)) else None,
+                         "reached": int(np.sum(~np.isnan(t_full))), "seeds": seeds,
+                         "values": [None if np.isnan(t) else float(t) for t in t_full]},
+        "best_cr": [float(max(r["cr"] for r in rows)) for rows in metric_rows],
+        "paths_per_solution": float(np.mean([r["paths"]["paths_per_solution"] for r in runs])),
+        "mi_state_pref": float(np.mean([r["mi"] for r in runs])),
+        "s_per_1k_steps": float(np.mean([json.loads((out / run_name(algo, s) / "summary.json").read_text())
+                                         ["s_per_1k_steps"] for s in range(seeds)])),
+    }
+    return result, runs[0], curves
 
-    n_prefs = next(iter(configs.values())).eval_prefs
-    results: dict[str, Any] = {}
-    curves: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]] = {"cr": {}, "optimal_share": {}, "timeout_share": {}}
-    analyses: dict[str, dict[str, Any]] = {}
-    for a in algos:
-        metric_rows = [read_metrics(out / a / f"seed_{s}") for s in range(seeds)]
-        n = min(len(r) for r in metric_rows)
-        step_axis = np.array([r["step"] for r in metric_rows[0][:n]])
-        for key in curves:
-            curves[key][a] = (step_axis, np.array([[r[key] for r in rows[:n]] for rows in metric_rows]))
-        runs = [analyse_run(out / a / f"seed_{s}", n_prefs) for s in range(seeds)]
-        analyses[a] = runs[0]
-        fin = {k: np.array([r["metrics"][k] for r in runs]) for k in
-               ("cr", "hv", "eum", "eum_optimal", "eum_gap", "optimal_share", "timeout_share")}
-        t_full = np.array([steps_to_full_coverage(rows) for rows in metric_rows])
-        results[a] = {
-            **{k: {"mean": float(v.mean()), "std": float(v.std())} for k, v in fin.items()},
-            "steps_to_cr1": {"median": float(np.nanmedian(t_full)) if np.any(~np.isnan(t_full)) else None,
-                             "reached": int(np.sum(~np.isnan(t_full))), "seeds": seeds},
-            "paths_per_solution": float(np.mean([r["paths"]["paths_per_solution"] for r in runs])),
-            "mi_state_pref": float(np.mean([r["mi"] for r in runs])),
-            "s_per_1k_steps": float(np.mean([json.loads((out / a / f"seed_{s}" / "summary.json").read_text())
-                                             ["s_per_1k_steps"] for s in range(seeds)])),
-        }
+
+def render_dst(out: Path, algos: Sequence[str], results: dict[str, Any], analyses: dict[str, Any],
+               curves: dict[str, dict[str, Any]]) -> str:
+    """Write Fig. 2, Fig. 3 and table.md; return the table."""
+    from mope.plots import plot_curves, plot_discriminator_maps, plot_fronts, plot_preference_solutions
 
     plot_curves(curves["cr"], out / "fig2a_cr.png")
     plot_curves(curves["optimal_share"], out / "fig2a_optimal_share.png", ylabel="optimal share",
@@ -158,6 +147,14 @@ def reproduce_dst(out: str | Path, seeds: int = 3, steps: int = 20_000, eval_eve
     maps = {a: analyses[a]["disc_map"] for a in algos if analyses[a]["disc_map"] is not None}
     if maps:
         plot_discriminator_maps(maps, first["sea_map"], out / "fig3b_discriminator.png")
+    table = dst_table(algos, results)
+    (out / "table.md").write_text(table + "\n")
+    return table
+
+
+def dst_table(algos: Sequence[str], results: dict[str, Any]) -> str:
+    """The reproduction's table: final metrics (mean ± std over seeds), coverage speed and diversity."""
+    from mope.plots import markdown_table
 
     def pm(d: dict[str, float], fmt: str = ".3f") -> str:
         return f"{d['mean']:{fmt}} ± {d['std']:{fmt}}"
@@ -173,8 +170,36 @@ def reproduce_dst(out: str | Path, seeds: int = 3, steps: int = 20_000, eval_eve
                      f"{pm(r['eum'], '.2f')} ({r['eum_optimal']['mean']:.2f})", pm(r["optimal_share"]),
                      pm(r["timeout_share"]), f"{r['paths_per_solution']:.2f}", f"{r['mi_state_pref']:.3f}",
                      f"{r['s_per_1k_steps']:.1f}"])
-    table = markdown_table(header, rows)
-    (out / "table.md").write_text(table + "\n")
-    (out / "results.json").write_text(json.dumps({"results": results, "seeds": seeds, "steps": steps,
-                                                  "train_wall_s": train_wall, "overrides": overrides}, indent=2))
-    return {"results": results, "table": table, "out": out, "train_wall_s": train_wall}
+    return markdown_table(header, rows)
+
+
+def reproduce_dst(out: str | Path, seeds: int = 3, steps: int = 20_000, eval_every: int = 1000,
+                  algos: tuple[str, ...] = ("eql", "ee", "pe", "mope"), workers: int = 2, progress: bool = True,
+                  backend: str = "local", address: str | None = None, env_id: str = DST,
+                  **overrides: Any) -> dict[str, Any]:
+    """Train, evaluate and plot the DST experiment; see the module docstring for the outputs.
+
+    Runs go through :func:`mope.jobs.run_jobs` (local processes or Ray), so an interrupted reproduction resumes:
+    finished runs are reused and interrupted ones continue from their last checkpoint.
+    """
+    jobs = dst_jobs(seeds, steps, eval_every, algos, env_id, **overrides)
+    out = Path(out)
+    with FolderLock(out, what="reproduction folder"):
+        t0 = time.perf_counter()
+        records = run_jobs(jobs, out, backend, workers, address, progress, desc="runs")
+        failed = [r for r in records.values() if r["status"] == "failed"]
+        if failed:
+            raise MopeError(f"{len(failed)} of {len(jobs)} runs failed, the first: {failed[0]['name']} "
+                            f"({failed[0]['error']}); see {out / failed[0]['name'] / 'error.txt'}")
+        train_wall = time.perf_counter() - t0
+        n_prefs = Config.from_dict(jobs[0].payload).run.eval_prefs
+        results, analyses, curves = {}, {}, {key: {} for key in CURVES}
+        for a in algos:
+            results[a], analyses[a], variant_curves = summarise_variant(out, a, seeds, n_prefs)
+            for key in CURVES:
+                curves[key][a] = variant_curves[key]
+        table = render_dst(out, algos, results, analyses, curves)
+        (out / "results.json").write_text(json.dumps({"results": results, "seeds": seeds, "steps": steps,
+                                                      "env_id": env_id, "train_wall_s": train_wall,
+                                                      "overrides": overrides}, indent=2))
+    return {"results": results, "table": table, "out": out, "train_wall_s": train_wall, "records": records}

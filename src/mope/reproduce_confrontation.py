@@ -3,7 +3,8 @@
 Trains, per seed, EQL and MoPE on ``mope/RobotConfrontationDiscrete-v0`` (one preference-conditioned agent
 each) and the outer-loop PPO baseline on ``mope/RobotConfrontation-v0`` (one policy per preference, K of them,
 on the scalarised reward ``w^T r`` through MO-Gymnasium's ``LinearReward``). Every run goes into its own folder
-and a finished run is reused, so an interrupted reproduction resumes where it stopped.
+and every run goes through the job runner (:mod:`mope.jobs`): a finished run is reused and an interrupted one
+resumes from its last checkpoint, locally or on Ray.
 
 Budget (``steps``): EQL and MoPE get ``steps`` environment steps each. With ``ppo_budget="each"`` (default)
 every PPO policy also gets ``steps``, so each trained policy sees as much experience as the one EQL/MoPE
@@ -30,7 +31,6 @@ from __future__ import annotations
 import json
 import time
 from collections import Counter
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
@@ -38,42 +38,15 @@ import numpy as np
 
 import mope.envs.confrontation as conf
 from mope.config import Config
-from mope.errors import ConfigError
-from mope.experiments import run_worker
+from mope.errors import ConfigError, MopeError
+from mope.jobs import Job, run_jobs
+from mope.locks import FolderLock
 
 METHODS = ("ppo", "eql", "mope")
 EVAL_SEED = 10_000
 FIG6_PREFS = ((0.0, 1.0), (0.25, 0.75), (0.5, 0.5), (0.75, 0.25), (1.0, 0.0))
 COLORS = {"ppo": "tab:orange", "eql": "tab:gray", "mope": "tab:green"}
 MARKERS = {"ppo": "s", "eql": "^", "mope": "o"}
-
-
-# ------------------------------------------------------------------------------------------------------------
-# training (process-pool workers)
-# ------------------------------------------------------------------------------------------------------------
-
-
-def _train_ppo(pref: list[float], steps: int, seed: int, path: str, device: str) -> str:
-    """Worker: train one PPO policy and save it to ``path`` (``.zip``) unless it exists."""
-    import torch
-
-    from mope.baselines import train_ppo
-
-    p = Path(path)
-    meta_path, meta = p.with_suffix(".json"), {"pref": pref, "steps": steps, "seed": seed}
-    if p.is_file() and meta_path.is_file():
-        saved = json.loads(meta_path.read_text())
-        if saved == meta:
-            return path
-        raise ConfigError(f"'{p}' holds a PPO policy trained with {saved}, not {meta}; use another --out")
-    torch.set_num_threads(1)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    model = train_ppo(pref, steps, seed, device=device)
-    tmp = p.with_name(p.stem + ".partial.zip")
-    model.save(tmp)
-    meta_path.write_text(json.dumps(meta))  # the metadata first: the .zip under its name marks the policy done
-    tmp.rename(p)
-    return path
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -150,7 +123,7 @@ def evaluate_agent(run_dir: Path, prefs: np.ndarray, episodes: int, record_prefs
     return eps, games
 
 
-def evaluate_ppo(paths: list[Path], episodes: int, gamma: float = 0.99) -> tuple[np.ndarray, Any]:
+def evaluate_ppo(folders: list[Path], episodes: int, gamma: float = 0.99) -> tuple[np.ndarray, Any]:
     """Play each saved PPO policy ``episodes`` times; return the preferences and the episodes (policy-major)."""
     import mo_gymnasium as mo_gym
     from stable_baselines3 import PPO
@@ -158,9 +131,9 @@ def evaluate_ppo(paths: list[Path], episodes: int, gamma: float = 0.99) -> tuple
     from mope.baselines import Episodes, play_episodes
 
     prefs, parts = [], []
-    for p in paths:
-        meta = json.loads(p.with_suffix(".json").read_text())
-        model = PPO.load(p, device="cpu")
+    for folder in folders:
+        meta = json.loads((folder / "summary.json").read_text())["meta"]
+        model = PPO.load(folder / "policy.zip", device="cpu")
         prefs.append(meta["pref"])
         parts.append(play_episodes(lambda obs, idx, mdl=model: mdl.predict(obs, deterministic=True)[0],
                                    lambda: mo_gym.make(conf.CONTINUOUS_ID).unwrapped, episodes,
@@ -224,34 +197,31 @@ def plot_fig6(games: Any, prefs: np.ndarray, half: float, path: Path) -> Path:
 # ------------------------------------------------------------------------------------------------------------
 # the experiment
 # ------------------------------------------------------------------------------------------------------------
-def reproduce_confrontation(out: str | Path, seeds: int = 1, steps: int = 15_000, ppo_prefs: int = 11,
-                            eval_prefs: int = 100, episodes: int = 5, workers: int = 2, progress: bool = True,
-                            ppo_budget: str = "each", device: str = "cpu",
-                            **overrides: Any) -> dict[str, Any]:
-    """Train PPO x K, EQL and MoPE, evaluate them and write Fig. 5, Fig. 6 and the table.
-
-    Args:
-        out: Output folder (run folders ``eql/seed_s``, ``mope/seed_s``, ``ppo/seed_s/pref_k.zip`` inside).
-        seeds: Seeds per method.
-        steps: Environment steps per EQL/MoPE agent, and per PPO policy (``ppo_budget="each"``) or for all K
-            together (``"shared"``).
-        ppo_prefs: K, PPO's equally spaced preferences.
-        eval_prefs: Equally spaced preferences for evaluating EQL and MoPE.
-        episodes: Episodes per preference (or PPO policy).
-        workers: Training processes.
-        progress: Show a progress bar over the runs.
-        ppo_budget: ``"each"`` or ``"shared"`` (see the module docstring).
-        device: Torch device of PPO (EQL/MoPE take ``device`` from ``overrides``, default cpu).
-        **overrides: Config fields for EQL and MoPE (e.g. ``n_omega=32``).
-
-    Returns:
-        ``{"results", "table", "out", "train_wall_s", "eval_wall_s"}``.
-    """
-    from tqdm.auto import tqdm
-
-    from mope.plots import markdown_table
+def confrontation_jobs(seeds: int, steps: int, ppo_prefs: int, ppo_steps: int, eval_prefs: int, device: str,
+                       overrides: dict[str, Any]) -> list[Job]:
+    """EQL and MoPE runs (one per seed) and PPO policies (K per seed), seed-major."""
     from mope.preferences import equally_spaced
 
+    base = {"env_id": conf.DISCRETE_ID, "total_steps": steps, "eval_every": 0, "eval_prefs": eval_prefs,
+            "checkpoint_every": 0, **overrides}
+    ppo_w = equally_spaced(2, ppo_prefs)
+    jobs = []
+    for s in range(seeds):
+        jobs += [Job(f"{a}-s{s}", "train", Config.for_algo(a, seed=s, **base).to_dict()) for a in ("eql", "mope")]
+        jobs += [Job(ppo_name(s, k), "ppo", {"pref": ppo_w[k].tolist(), "steps": ppo_steps, "seed": 1000 * s + k,
+                                             "env_id": conf.CONTINUOUS_ID, "device": device})
+                 for k in range(ppo_prefs)]
+    return jobs
+
+
+def ppo_name(seed: int, k: int) -> str:
+    """Folder of PPO policy ``k`` of seed ``seed``."""
+    return f"ppo-s{seed}-pref{k:02d}"
+
+
+def check_confrontation_args(seeds: int, steps: int, ppo_prefs: int, eval_prefs: int, episodes: int, workers: int,
+                             ppo_budget: str) -> int:
+    """Validate the arguments; return the steps each PPO policy gets."""
     for name, val in (("seeds", seeds), ("steps", steps), ("ppo_prefs", ppo_prefs), ("eval_prefs", eval_prefs),
                       ("episodes", episodes), ("workers", workers)):
         if not isinstance(val, int) or val < 1:
@@ -261,48 +231,32 @@ def reproduce_confrontation(out: str | Path, seeds: int = 1, steps: int = 15_000
     ppo_steps = steps if ppo_budget == "each" else steps // ppo_prefs
     if ppo_steps < 64:
         raise ConfigError(f"steps={steps} leaves {ppo_steps} steps per PPO policy; need at least 64")
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    base = {"env_id": conf.DISCRETE_ID, "total_steps": steps, "eval_every": 0, "eval_prefs": eval_prefs,
-            "checkpoint_every": 0, **overrides}
-    configs = {f"{a}/seed_{s}": Config.for_algo(a, seed=s, **base) for s in range(seeds) for a in ("eql", "mope")}
-    ppo_w = equally_spaced(2, ppo_prefs)
-    ppo_paths = {s: [out / "ppo" / f"seed_{s}" / f"pref_{k:02d}.zip" for k in range(ppo_prefs)] for s in range(seeds)}
+    return ppo_steps
 
-    t0 = time.perf_counter()
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = {pool.submit(run_worker, cfg.to_dict(), str(out / name)): name for name, cfg in configs.items()}
-        for s in range(seeds):
-            for k, p in enumerate(ppo_paths[s]):
-                futures[pool.submit(_train_ppo, ppo_w[k].tolist(), ppo_steps, 1000 * s + k, str(p), device)] = \
-                    f"ppo/seed_{s}/pref_{k:02d}"
-        with tqdm(total=len(futures), desc="runs", disable=not progress, unit="run") as bar:
-            for fut in as_completed(futures):
-                fut.result()
-                bar.update(1)
-                bar.set_postfix_str(futures[fut])
-    train_wall = time.perf_counter() - t0
 
-    t1 = time.perf_counter()
+def evaluate_confrontation(out: Path, seeds: int, ppo_prefs: int, eval_prefs: int, episodes: int,
+                           max_steps: int | None) -> tuple[dict[str, list[dict[str, Any]]], Any]:
+    """Every method's summary per seed, and MoPE's recorded Fig. 6 games (seed 0)."""
+    from mope.preferences import equally_spaced
+
     probe = conf.RobotConfrontationEnv()
-    ref = conf.reference_point(1.0, max(overrides.get("max_episode_steps") or 0, conf.DEFAULT_HORIZON))
+    ref = conf.reference_point(1.0, max(max_steps or 0, conf.DEFAULT_HORIZON))
     eval_w = equally_spaced(2, eval_prefs)
     fig6_w = np.asarray(FIG6_PREFS)
     per_seed: dict[str, list[dict[str, Any]]] = {m: [] for m in METHODS}
     games = None
     for s in range(seeds):
-        w, eps = evaluate_ppo(ppo_paths[s], episodes)
+        w, eps = evaluate_ppo([out / ppo_name(s, k) for k in range(ppo_prefs)], episodes)
         per_seed["ppo"].append(summarize(w, eps, episodes, ref, probe.dt, probe.v_max))
         for a in ("eql", "mope"):
-            eps, g = evaluate_agent(out / a / f"seed_{s}", eval_w, episodes,
-                                    fig6_w if (a == "mope" and s == 0) else None)
+            eps, g = evaluate_agent(out / f"{a}-s{s}", eval_w, episodes, fig6_w if (a == "mope" and s == 0) else None)
             games = g if g is not None else games
             per_seed[a].append(summarize(eval_w, eps, episodes, ref, probe.dt, probe.v_max))
-    eval_wall = time.perf_counter() - t1
+    return per_seed, games
 
-    plot_fig5({m: per_seed[m][0]["points"] for m in METHODS}, out / "fig5_front.png")
-    plot_fig6(games, fig6_w, probe.half, out / "fig6_trajectories.png")
 
+def confrontation_results(out: Path, per_seed: dict[str, list[dict[str, Any]]], seeds: int) -> dict[str, Any]:
+    """Mean and std over seeds of every table metric, plus seed 0's solutions and the agents' training time."""
     keys = ("hv", "win", "loss", "out", "blue_out", "timeout", "strategies", "entropy_bits", "r_catch", "r_move")
     results: dict[str, Any] = {}
     for m in METHODS:
@@ -312,8 +266,15 @@ def reproduce_confrontation(out: str | Path, seeds: int = 1, steps: int = 15_000
         results[m]["points_seed0"] = per_seed[m][0]["points"].round(4).tolist()
         results[m]["prefs_seed0"] = per_seed[m][0]["prefs"].round(4).tolist()
     for a in ("eql", "mope"):
-        walls = [json.loads((out / a / f"seed_{s}" / "summary.json").read_text()) for s in range(seeds)]
+        walls = [json.loads((out / f"{a}-s{s}" / "summary.json").read_text()) for s in range(seeds)]
         results[a]["train_wall_s"] = float(np.mean([w.get("wall_s", np.nan) for w in walls]))
+    return results
+
+
+def confrontation_table(results: dict[str, Any], seeds: int, steps: int, ppo_steps: int, ppo_prefs: int,
+                        eval_prefs: int) -> str:
+    """The reproduction's table (mean ± std over seeds)."""
+    from mope.plots import markdown_table
 
     def pm(d: dict[str, float], fmt: str) -> str:
         return f"{d['mean']:{fmt}}" if seeds == 1 else f"{d['mean']:{fmt}} ± {d['std']:{fmt}}"
@@ -328,10 +289,58 @@ def reproduce_confrontation(out: str | Path, seeds: int = 1, steps: int = 15_000
                      pm(r["loss"], ".3f"), pm(r["out"], ".3f"), pm(r["timeout"], ".3f"),
                      f"{pm(r['strategies'], '.1f')} ({pm(r['entropy_bits'], '.2f')})", pm(r["r_catch"], ".2f"),
                      pm(r["r_move"], ".2f")])
-    table = markdown_table(header, rows)
-    (out / "table.md").write_text(table + "\n")
-    (out / "results.json").write_text(json.dumps({
-        "results": results, "seeds": seeds, "steps": steps, "ppo_steps": ppo_steps, "ppo_budget": ppo_budget,
-        "ppo_prefs": ppo_prefs, "eval_prefs": eval_prefs, "episodes": episodes, "ref_point": ref.tolist(),
-        "train_wall_s": train_wall, "eval_wall_s": eval_wall, "overrides": overrides}, indent=2))
-    return {"results": results, "table": table, "out": out, "train_wall_s": train_wall, "eval_wall_s": eval_wall}
+    return markdown_table(header, rows)
+
+
+def reproduce_confrontation(out: str | Path, seeds: int = 1, steps: int = 15_000, ppo_prefs: int = 11,
+                            eval_prefs: int = 100, episodes: int = 5, workers: int = 2, progress: bool = True,
+                            ppo_budget: str = "each", device: str = "cpu", backend: str = "local",
+                            address: str | None = None, **overrides: Any) -> dict[str, Any]:
+    """Train PPO x K, EQL and MoPE, evaluate them and write Fig. 5, Fig. 6 and the table.
+
+    Args:
+        out: Output folder (run folders ``eql-s<seed>``, ``mope-s<seed>``, ``ppo-s<seed>-pref<k>`` inside).
+        seeds: Seeds per method.
+        steps: Environment steps per EQL/MoPE agent, and per PPO policy (``ppo_budget="each"``) or for all K
+            together (``"shared"``).
+        ppo_prefs: K, PPO's equally spaced preferences.
+        eval_prefs: Equally spaced preferences for evaluating EQL and MoPE.
+        episodes: Episodes per preference (or PPO policy).
+        workers: Training processes.
+        progress: Show a progress bar over the runs.
+        ppo_budget: ``"each"`` or ``"shared"`` (see the module docstring).
+        device: Torch device of PPO (EQL/MoPE take ``device`` from ``overrides``, default cpu).
+        backend: ``local`` or ``ray`` (the job runner's backends).
+        address: Ray cluster address.
+        **overrides: Config fields for EQL and MoPE (e.g. ``n_omega=32``).
+
+    Returns:
+        ``{"results", "table", "out", "train_wall_s", "eval_wall_s"}``.
+    """
+    ppo_steps = check_confrontation_args(seeds, steps, ppo_prefs, eval_prefs, episodes, workers, ppo_budget)
+    jobs = confrontation_jobs(seeds, steps, ppo_prefs, ppo_steps, eval_prefs, device, overrides)
+    out = Path(out)
+    with FolderLock(out, what="reproduction folder"):
+        t0 = time.perf_counter()
+        records = run_jobs(jobs, out, backend, workers, address, progress, desc="runs")
+        failed = [r for r in records.values() if r["status"] == "failed"]
+        if failed:
+            raise MopeError(f"{len(failed)} of {len(jobs)} runs failed, the first: {failed[0]['name']} "
+                            f"({failed[0]['error']}); see {out / failed[0]['name'] / 'error.txt'}")
+        train_wall = time.perf_counter() - t0
+        t1 = time.perf_counter()
+        per_seed, games = evaluate_confrontation(out, seeds, ppo_prefs, eval_prefs, episodes,
+                                                 overrides.get("max_episode_steps"))
+        eval_wall = time.perf_counter() - t1
+        plot_fig5({m: per_seed[m][0]["points"] for m in METHODS}, out / "fig5_front.png")
+        plot_fig6(games, np.asarray(FIG6_PREFS), conf.RobotConfrontationEnv().half, out / "fig6_trajectories.png")
+        results = confrontation_results(out, per_seed, seeds)
+        table = confrontation_table(results, seeds, steps, ppo_steps, ppo_prefs, eval_prefs)
+        (out / "table.md").write_text(table + "\n")
+        ref = conf.reference_point(1.0, max(overrides.get("max_episode_steps") or 0, conf.DEFAULT_HORIZON))
+        (out / "results.json").write_text(json.dumps({
+            "results": results, "seeds": seeds, "steps": steps, "ppo_steps": ppo_steps, "ppo_budget": ppo_budget,
+            "ppo_prefs": ppo_prefs, "eval_prefs": eval_prefs, "episodes": episodes, "ref_point": ref.tolist(),
+            "train_wall_s": train_wall, "eval_wall_s": eval_wall, "overrides": overrides}, indent=2))
+    return {"results": results, "table": table, "out": out, "train_wall_s": train_wall, "eval_wall_s": eval_wall,
+            "records": records}

@@ -27,26 +27,21 @@ import contextlib
 import itertools
 import json
 import math
-import multiprocessing
-import os
 import re
 import time
-import traceback
-from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
-from concurrent.futures.process import BrokenProcessPool
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from mope.config import Config
 from mope.errors import ConfigError, MopeError, suggest
+from mope.jobs import Job, JobError, check_backend, run_jobs
+from mope.locks import FolderLock
 
 SPEC_KEYS = ("name", "base", "grid", "seeds", "seed")
-BACKENDS = ("local", "ray")
 #: Fields that do not change a run's results; a finished trial whose saved config differs only in these is reused.
 NON_RESULT_FIELDS = ("device", "torch_threads")
-RAY_MISSING = "the ray backend needs Ray: pip install 'mope[ray]'"
 
 
 class SweepError(MopeError):
@@ -305,166 +300,9 @@ def check_existing(trials: Iterable[Trial], out: Path) -> None:
 # ------------------------------------------------------------------------------------------------------------
 # running
 # ------------------------------------------------------------------------------------------------------------
-def _run_trial(name: str, config_dict: dict[str, Any], out_dir: str) -> dict[str, Any]:
-    """Worker: train, resume or skip one trial; never raises for a failed training (it is recorded instead)."""
-    import torch
-
-    torch.set_num_threads(max(1, int(config_dict.get("torch_threads") or 1)))
-    from mope.experiments import run_status, train_run
-
-    out = Path(out_dir)
-    t0 = time.perf_counter()
-    status = run_status(out)
-    action = {"finished": "skipped", "resumable": "resumed"}.get(status, "trained")
-    try:
-        if status != "finished":
-            (out / "error.txt").unlink(missing_ok=True)
-            train_run(Config.from_dict(config_dict), out, progress=False, overwrite=True, resume=True)
-        final = json.loads((out / "summary.json").read_text()).get("final", {})
-        return {"name": name, "status": "finished", "action": action, "final": final,
-                "wall_s": time.perf_counter() - t0, "error": None}
-    except Exception as exc:  # noqa: BLE001 - any failure of one trial is recorded, the sweep goes on
-        with contextlib.suppress(OSError):  # the folder itself may be what failed; sweep.json keeps the error
-            out.mkdir(parents=True, exist_ok=True)
-            (out / "error.txt").write_text(traceback.format_exc())
-        return {"name": name, "status": "failed", "action": "failed", "final": {},
-                "wall_s": time.perf_counter() - t0, "error": f"{type(exc).__name__}: {exc}"}
-
-
-def _run_trial_remote(name: str, config_dict: dict[str, Any], out_dir: str) -> dict[str, Any]:
-    """Ray task: :func:`_run_trial`, in place when this node sees the sweep folder (a shared filesystem).
-
-    Otherwise (a worker node or Ray Client cluster without the driver's filesystem) the trial trains into a
-    temporary folder and comes back packed in ``rec["archive"]`` (a gzipped tar, without the resume checkpoint),
-    for the driver to unpack into the sweep folder.
-    """
-    import io
-    import tarfile
-    import tempfile
-
-    if (Path(out_dir).parent / "sweep.json").is_file():
-        return _run_trial(name, config_dict, out_dir)
-    with tempfile.TemporaryDirectory(prefix="mope-trial-") as tmp:
-        rec = _run_trial(name, config_dict, str(Path(tmp) / name))
-        buf = io.BytesIO()
-        with tarfile.open(fileobj=buf, mode="w:gz") as tar:
-            tar.add(Path(tmp) / name, arcname=name,
-                    filter=lambda info: None if info.name.endswith(("resume.pt", "interrupted.pt")) else info)
-        rec["archive"] = buf.getvalue()
-    return rec
-
-
-def unpack_trial(rec: dict[str, Any], out: Path) -> None:
-    """Unpack a trial folder that a Ray task sent back (see :func:`_run_trial_remote`) into the sweep folder."""
-    import io
-    import tarfile
-
-    archive = rec.pop("archive", None)
-    if archive is None:
-        return
-    with tarfile.open(fileobj=io.BytesIO(archive), mode="r:gz") as tar:
-        names = tar.getnames()
-        if any((n != rec["name"] and not n.startswith(rec["name"] + "/")) or ".." in Path(n).parts for n in names):
-            raise SweepError(f"the archive of trial '{rec['name']}' holds files outside its folder")
-        safe = {"filter": "data"} if hasattr(tarfile, "data_filter") else {}  # Python >= 3.11.4
-        tar.extractall(out, **safe)
-
-
-def _init_worker() -> None:
-    import torch
-
-    torch.set_num_threads(1)
-
-
-class _Summary:
-    """The live line: a bar over trials with done / running / failed / skipped counts."""
-
-    def __init__(self, total: int, done: int, enabled: bool) -> None:
-        from tqdm.auto import tqdm
-
-        self.done, self.failed, self.skipped, self.running = done, 0, done, 0
-        self.bar = tqdm(total=total, initial=done, desc="sweep", unit="trial", disable=not enabled)
-        self.refresh()
-
-    def refresh(self, redraw: bool = True) -> None:
-        self.bar.set_postfix_str(f"done {self.done}, running {self.running}, failed {self.failed}, "
-                                 f"skipped {self.skipped}", refresh=redraw)
-
-    def finished(self, rec: dict[str, Any]) -> None:
-        if rec["status"] == "failed":
-            self.failed += 1
-            self.bar.write(f"trial {rec['name']} failed: {rec['error']}")
-        else:
-            self.done += 1
-            self.skipped += rec["action"] == "skipped"
-        self.running = max(0, self.running - 1)
-        self.refresh(redraw=False)
-        self.bar.update(1)
-
-    def close(self) -> None:
-        self.bar.close()
-
-
-def _local_backend(jobs: list[tuple[str, dict[str, Any], str]], workers: int,
-                   on_done: Callable[[dict[str, Any]], None], on_running: Callable[[int], None]) -> None:
-    method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
-    ctx = multiprocessing.get_context(method)
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker)
-    try:
-        pending: set[Future] = {pool.submit(_run_trial, *job) for job in jobs}
-        while pending:
-            finished, pending = wait(pending, timeout=1.0, return_when=FIRST_COMPLETED)
-            for fut in finished:
-                try:
-                    on_done(fut.result())
-                except BrokenProcessPool as exc:  # a worker was killed (OOM killer, signal): not a trial error
-                    raise SweepError(f"a trial process died ({exc}); run the sweep again to resume "
-                                     "the unfinished trials") from None
-            on_running(min(workers, sum(f.running() for f in pending)))
-    except BaseException:
-        pool.shutdown(wait=False, cancel_futures=True)
-        raise
-    pool.shutdown(wait=True)
-
-
-def _ray_backend(jobs: list[tuple[str, dict[str, Any], str]], out: Path, workers: int | None, address: str | None,
-                 on_done: Callable[[dict[str, Any]], None], on_running: Callable[[int], None]) -> None:
-    try:
-        import ray
-    except ImportError:
-        raise SweepError(RAY_MISSING) from None
-    started = False
-    if not ray.is_initialized():
-        # a local instance sized to --workers; a cluster (or Ray Client, ray://) takes only its address
-        kwargs: dict[str, Any] = {"address": address} if address is not None else \
-            {"include_dashboard": False, "log_to_driver": False, "num_cpus": workers}
-        try:
-            ray.init(**kwargs)
-        except (ConnectionError, ValueError, RuntimeError) as exc:
-            raise SweepError(f"could not connect to Ray at address={address!r}: {exc}") from None
-        started = True
-    try:
-        slots = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
-        remote = ray.remote(num_cpus=1, max_retries=0)(_run_trial_remote)
-        queue = list(jobs)
-        pending: list[Any] = []
-        while queue or pending:
-            while queue and len(pending) < slots:  # keep at most `slots` trials in flight
-                pending.append(remote.remote(*queue.pop(0)))
-            ready, pending = ray.wait(pending, num_returns=1, timeout=1.0)
-            for ref in ready:
-                rec = ray.get(ref)
-                unpack_trial(rec, out)
-                on_done(rec)
-            on_running(len(pending))
-    finally:
-        if started:
-            ray.shutdown()
-
-
 def run_sweep(spec: SweepSpec | str | Path, out_dir: str | Path | None = None, backend: str = "local",
               address: str | None = None, workers: int | None = None, progress: bool = True) -> list[TrialResult]:
-    """Run every trial of a sweep; skip finished trials, resume interrupted ones.
+    """Run every trial of a sweep through :func:`mope.jobs.run_jobs`; skip finished trials, resume interrupted ones.
 
     Args:
         spec: A :class:`SweepSpec` or the path of a YAML spec.
@@ -479,62 +317,37 @@ def run_sweep(spec: SweepSpec | str | Path, out_dir: str | Path | None = None, b
         One :class:`TrialResult` per trial, in the spec's order.
 
     Raises:
-        SweepError: for a bad spec, backend or worker count, before anything is launched.
+        SweepError: for a bad spec, backend or worker count, before anything is launched; FolderLockedError when
+            another process is running a sweep in the same folder.
     """
-    if backend not in BACKENDS:
-        raise SweepError(f"unknown backend '{backend}'{suggest(backend, BACKENDS)}; "
-                         f"choose one of {', '.join(BACKENDS)}")
-    if address is not None and backend != "ray":
-        raise SweepError(f"--address {address} needs --backend ray")
-    if workers is not None and (not _is_int(workers) or workers < 1):
-        raise SweepError(f"workers={workers!r} is out of range: must be >= 1")
+    try:
+        check_backend(backend, address, workers)
+    except JobError as exc:
+        raise SweepError(str(exc)) from None
     if not isinstance(spec, SweepSpec):
         spec = load_spec(spec)
-    if backend == "ray":
-        try:
-            import ray  # noqa: F401
-        except ImportError:
-            raise SweepError(RAY_MISSING) from None
     trials = expand(spec)
     check_environments(trials)
     out = Path(out_dir) if out_dir is not None else Path("runs") / spec.name
     check_existing(trials, out)
-    out.mkdir(parents=True, exist_ok=True)
-
-    from mope.experiments import run_status
-
-    records: dict[str, dict[str, Any]] = {}
-    for t in trials:
-        if run_status(out / t.name) == "finished":
-            summary = json.loads((out / t.name / "summary.json").read_text())
-            records[t.name] = {"name": t.name, "status": "finished", "action": "skipped",
-                               "final": summary.get("final", {}), "wall_s": 0.0, "error": None}
-    jobs = [(t.name, t.config.to_dict(), str(out / t.name)) for t in trials if t.name not in records]
-    state: dict[str, Any] = {"backend": backend, "address": address, "started": time.time()}
-    _write_sweep_json(out, spec, trials, records, state)
-
-    summary_line = _Summary(len(trials), len(records), progress)
-
-    def on_done(rec: dict[str, Any]) -> None:
-        records[rec["name"]] = rec
-        summary_line.finished(rec)
+    with FolderLock(out, what="sweep folder"):
+        records: dict[str, dict[str, Any]] = {}
+        state: dict[str, Any] = {"backend": backend, "address": address, "started": time.time()}
         _write_sweep_json(out, spec, trials, records, state)
 
-    def on_running(n: int) -> None:
-        if n != summary_line.running:
-            summary_line.running = n
-            summary_line.refresh()
+        def on_done(rec: dict[str, Any]) -> None:
+            records[rec["name"]] = rec
+            _write_sweep_json(out, spec, trials, records, state)
 
-    t0 = time.perf_counter()
-    try:
-        if jobs and backend == "local":
-            _local_backend(jobs, min(workers or os.cpu_count() or 1, len(jobs)), on_done, on_running)
-        elif jobs:
-            _ray_backend(jobs, out, workers, address, on_done, on_running)
-    finally:
-        summary_line.close()
-        state["wall_s"] = time.perf_counter() - t0
-        _write_sweep_json(out, spec, trials, records, state)
+        t0 = time.perf_counter()
+        jobs = [Job(t.name, "train", t.config.to_dict()) for t in trials]
+        try:
+            run_jobs(jobs, out, backend, workers, address, progress, desc="sweep", on_done=on_done)
+        except JobError as exc:
+            raise SweepError(str(exc)) from None
+        finally:
+            state["wall_s"] = time.perf_counter() - t0
+            _write_sweep_json(out, spec, trials, records, state)
     return [_result(out, t, records[t.name]) for t in trials]
 
 

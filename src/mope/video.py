@@ -53,27 +53,13 @@ def record_video(policy: Any, env_id: str, pref: Any, path: str | Path, seed: in
         ``{"path", "frames", "return" (undiscounted vector), "outcome" (``info["outcome"]`` if any)}``.
     """
     import imageio.v3 as iio
-    import mo_gymnasium as mo_gym
 
-    import mope.envs.confrontation  # noqa: F401 - registers the confrontation ids
-    from mope.envs import registered_ids
-    from mope.errors import suggest
     from mope.preferences import validate_preference
 
     out = Path(path)
     if out.suffix.lower() != ".gif":
         raise VideoError(f"video path '{out}' must end in .gif")
-    if env_id not in gym.registry:
-        raise VideoError(f"unknown environment '{env_id}'{suggest(env_id, registered_ids())}")
-    try:
-        with warnings.catch_warnings():  # an env without rgb_array warns here; the check below says it plainly
-            warnings.filterwarnings("ignore", message=".*not in the possible render_modes.*")
-            env = mo_gym.make(env_id, render_mode="rgb_array", **env_kwargs)
-    except Exception as exc:  # noqa: BLE001 - missing dependencies or bad kwargs of the user's environment
-        raise VideoError(f"environment '{env_id}' could not be created for rendering: {exc}") from None
-    if "rgb_array" not in env.metadata.get("render_modes", []):
-        env.close()
-        raise VideoError(f"environment '{env_id}' cannot render rgb_array frames, so no video can be recorded")
+    env = _rendering_env(env_id, env_kwargs)
     m = int(env.unwrapped.reward_space.shape[0])
     w = validate_preference(pref, m) if pref is not None else None
     act = _action_fn(policy, w)
@@ -97,6 +83,28 @@ def record_video(policy: Any, env_id: str, pref: Any, path: str | Path, seed: in
     except OSError as exc:
         raise VideoError(f"cannot write '{out}': {exc.strerror or exc}") from None
     return {"path": out, "frames": len(frames), "return": total, "outcome": info.get("outcome")}
+
+
+def _rendering_env(env_id: str, env_kwargs: dict[str, Any]) -> Any:
+    """The environment built with ``render_mode="rgb_array"``, or a :class:`VideoError` saying why not."""
+    import mo_gymnasium as mo_gym
+
+    import mope.envs.confrontation  # noqa: F401 - registers the confrontation ids
+    from mope.envs import registered_ids
+    from mope.errors import suggest
+
+    if env_id not in gym.registry:
+        raise VideoError(f"unknown environment '{env_id}'{suggest(env_id, registered_ids())}")
+    try:
+        with warnings.catch_warnings():  # an env without rgb_array warns here; the check below says it plainly
+            warnings.filterwarnings("ignore", message=".*not in the possible render_modes.*")
+            env = mo_gym.make(env_id, render_mode="rgb_array", **env_kwargs)
+    except Exception as exc:  # noqa: BLE001 - missing dependencies or bad kwargs of the user's environment
+        raise VideoError(f"environment '{env_id}' could not be created for rendering: {exc}") from None
+    if "rgb_array" not in env.metadata.get("render_modes", []):
+        env.close()
+        raise VideoError(f"environment '{env_id}' cannot render rgb_array frames, so no video can be recorded")
+    return env
 
 
 def _frame(env: Any, env_id: str) -> np.ndarray:

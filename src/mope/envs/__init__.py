@@ -23,6 +23,7 @@ warnings.filterwarnings("ignore", message=".*precision lowered by casting.*")
 KNOWN_REF_POINTS: dict[str, tuple[float, ...]] = {
     "deep-sea-treasure-v0": (0.0, -25.0),
     "deep-sea-treasure-concave-v0": (0.0, -25.0),
+    "mope/deep-sea-treasure-seabed-v0": (0.0, -25.0),
     "deep-sea-treasure-mirrored-v0": (0.0, -50.0),
     "fruit-tree-v0": (0.0,) * 6,
     "four-room-v0": (-1.0, -1.0, -1.0),
@@ -61,7 +62,7 @@ def make_env(env_id: str, max_episode_steps: int | None = None, **kwargs) -> gym
     return env
 
 
-class DiscreteActions(gym.ActionWrapper):
+class DiscreteActions(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
     """Give a continuous-action (``Box``) environment a ``Discrete`` action space, so EQL/MoPE can use it.
 
     Each dimension of the box is cut into ``bins`` evenly spaced values from ``low`` to ``high``; discrete action
@@ -73,6 +74,7 @@ class DiscreteActions(gym.ActionWrapper):
     """
 
     def __init__(self, env: gym.Env, bins: int = 5) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, bins=bins)  # lets a checkpoint rebuild the wrapped env
         super().__init__(env)
         space = env.action_space
         if not isinstance(space, gym.spaces.Box):
@@ -162,3 +164,7 @@ def default_ref_point(env: gym.Env, env_id: str, gamma: float, horizon: int | No
 
 
 from mope.envs import confrontation  # noqa: E402, F401 - registers mope/RobotConfrontation*-v0
+from mope.envs.dst import SEABED_ID  # noqa: E402
+
+if SEABED_ID not in gym.registry:
+    gym.register(SEABED_ID, entry_point="mope.envs.dst:SeabedDeepSeaTreasure", max_episode_steps=100)

@@ -66,11 +66,15 @@ class DeepSeaTreasureBatch:
         base.reset()
         self.start = np.asarray(base.current_state, dtype=np.int64).copy()
         self.pos = np.tile(self.start, (n, 1))
+        #: The EQL authors' rule (mope.envs.dst): moving into the rock ends the episode with (seabed_reward, -1).
+        self.seabed_terminates = bool(getattr(base, "seabed_terminates", False))
+        self.seabed_reward = float(getattr(base, "seabed_reward", 0.0))
 
     @staticmethod
     def supports(env: gym.Env) -> bool:
         """True for MO-Gymnasium's Deep-Sea-Treasure with no wrapper that changes what the agent sees or does."""
-        if type(env.unwrapped).__name__ != "DeepSeaTreasure" or not hasattr(env.unwrapped, "sea_map"):
+        if type(env.unwrapped).__name__ not in ("DeepSeaTreasure", "SeabedDeepSeaTreasure") \
+                or not hasattr(env.unwrapped, "sea_map"):
             return False
         layer = env
         while isinstance(layer, gym.Wrapper):
@@ -105,12 +109,13 @@ class DeepSeaTreasureBatch:
         rows, cols = self.map.shape
         inside = (nxt[:, 0] >= 0) & (nxt[:, 0] < rows) & (nxt[:, 1] >= 0) & (nxt[:, 1] < cols)
         safe = np.where(inside[:, None], nxt, pos)
-        valid = inside & (self.map[safe[:, 0], safe[:, 1]] != -10)
+        rock = inside & (self.map[safe[:, 0], safe[:, 1]] == -10)
+        valid = inside & (~rock | self.seabed_terminates)
         pos = np.where(valid[:, None], nxt, pos)
         self.pos[idx] = pos
         value = self.map[pos[:, 0], pos[:, 1]]
-        term = (value != 0) & (value != -10)
-        treasure = np.where(term, value, 0.0).astype(np.float32)
+        term = (value != 0) & ((value != -10) | self.seabed_terminates)
+        treasure = np.where(term, np.where(value == -10, self.seabed_reward, value), 0.0).astype(np.float32)
         rew = np.stack([treasure, np.full(len(idx), -1.0, dtype=np.float32)], axis=1).astype(np.float64)
         return self._obs(pos), rew, term
 

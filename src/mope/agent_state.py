@@ -1,0 +1,182 @@
+"""Saving and loading an agent: its weights, its whole training state, and the environment it was trained on.
+
+:class:`AgentState` is the base class of :class:`mope.agent.MoPE`: everything about checkpoints lives here, so
+the agent module holds only acting and learning.
+
+A checkpoint stores the config, the networks and optimizers, the preference counts, the step counters and RNG
+states, and (``include_buffer=True``) the replay buffer and the episode in progress. It also stores how to
+rebuild the environment: Gymnasium's ``EnvSpec`` of the environment, wrappers included, when every wrapper
+records its arguments (as ``mope.envs.DiscreteActions`` does). A checkpoint of an environment that cannot be
+rebuilt that way loads only with ``env=`` given, and says so.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+from mope.checkpoint import check_compatible, load_checkpoint, save_checkpoint
+from mope.config import Config
+from mope.errors import CheckpointError, EnvironmentError_, MopeError
+
+
+def resolve_device(name: str) -> torch.device:
+    """``cpu``, ``cuda`` or ``auto`` (cuda when available)."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name == "cuda" and not torch.cuda.is_available():
+        raise MopeError("device 'cuda' was asked for but torch sees no CUDA GPU; use --device cpu or auto")
+    return torch.device(name)
+
+
+def env_recipe(env: gym.Env) -> dict[str, Any]:
+    """How to rebuild ``env``: ``{"spec": <EnvSpec JSON>}``, or ``{"spec": None, "why": ...}`` when it cannot be.
+
+    An environment made by ``gymnasium.make`` / ``mo_gymnasium.make`` and wrapped only by wrappers that record
+    their constructor arguments (``gymnasium.utils.RecordConstructorArgs``) can be rebuilt from its spec.
+    """
+    spec = env.spec
+    if spec is None:
+        return {"spec": None, "why": f"it was built by hand ({type(env.unwrapped).__name__}, not by gymnasium.make)"}
+    unrecorded = [w.name for w in spec.additional_wrappers if w.kwargs is None]
+    if unrecorded:
+        return {"spec": None, "why": f"its wrapper {unrecorded[0]} does not record its arguments"}
+    try:
+        return {"spec": spec.to_json()}
+    except (ValueError, TypeError) as exc:
+        return {"spec": None, "why": f"its spec cannot be saved ({str(exc).splitlines()[0]})"}
+
+
+def rebuild_env(saved: dict[str, Any], config: Config, path: str | Path) -> gym.Env | str:
+    """The environment a checkpoint was trained on (or its id, for checkpoints that predate recipes).
+
+    Raises:
+        CheckpointError: when the checkpoint's environment cannot be rebuilt; the message says to pass ``env=``.
+    """
+    if "spec" not in saved:  # older checkpoints: the id is all there is
+        return config.env_id
+    if saved["spec"] is None:
+        raise CheckpointError(
+            f"checkpoint '{path}' was trained on an environment that cannot be rebuilt from the checkpoint "
+            f"({saved.get('why', 'unknown reason')}); load it in Python with MoPE.load(path, env=your_env)")
+    try:
+        return gym.make(gym.envs.registration.EnvSpec.from_json(saved["spec"]))
+    except Exception as exc:  # noqa: BLE001 - a missing package, a removed registration, bad kwargs
+        raise EnvironmentError_(f"checkpoint '{path}': its environment '{config.env_id}' could not be rebuilt "
+                                f"({str(exc).splitlines()[0] if str(exc) else type(exc).__name__}); pass env=") \
+            from None
+
+
+class AgentState:
+    """Checkpoint support for an agent with ``q_net``, ``target_net``, ``optimizer`` and the rest of MoPE's state."""
+
+    config: Config
+
+    def state_dict(self, include_buffer: bool = False) -> dict[str, Any]:
+        """Everything needed to act (and, with ``include_buffer``, to resume training)."""
+        a: Any = self
+        state: dict[str, Any] = {
+            "config": a.config.to_dict(),
+            "env": {"n_actions": a.n_actions, "n_objectives": a.m, "obs_shape": list(a.obs_shape),
+                    **env_recipe(a.env)},
+            "q_net": a.q_net.state_dict(),
+            "target_net": a.target_net.state_dict(),
+            "optimizer": a.optimizer.state_dict(),
+            "preference_sampler": a.pref_sampler.state_dict(),
+            "global_step": a.global_step,
+            "episodes": a.episodes,
+            "rng": a.rng.bit_generator.state,
+            "torch_rng": torch.get_rng_state(),
+            "wall_s": a.wall_s,
+        }
+        if a.discriminator is not None and a.disc_optimizer is not None:
+            state["discriminator"] = a.discriminator.state_dict()
+            state["disc_optimizer"] = a.disc_optimizer.state_dict()
+        if include_buffer:
+            state["buffer"] = {k: torch.as_tensor(v) if isinstance(v, np.ndarray) else v
+                               for k, v in a.buffer.state_dict().items()}
+            if a._pref is not None:
+                state["episode"] = {"pref": torch.as_tensor(a._pref),
+                                    "actions": torch.as_tensor(a._episode_actions, dtype=torch.int64)}
+            state["last_losses"] = dict(a.last_losses)
+        return state
+
+    def save(self, path: str | Path, include_buffer: bool = False) -> Path:
+        """Write a checkpoint (atomically). ``MoPE.load`` / ``EQL.load`` read it back."""
+        return save_checkpoint(path, self.state_dict(include_buffer))
+
+    @classmethod
+    def load(cls, path: str | Path, env: gym.Env | None = None, **overrides: Any) -> Any:
+        """Load a checkpoint written by :meth:`save`.
+
+        The saved config decides the variant: ``MoPE.load`` returns an :class:`~mope.agent.EQL` for an EQL
+        checkpoint and a :class:`~mope.agent.MoPE` otherwise; ``EQL.load`` refuses a checkpoint of another
+        variant. ``env`` defaults to the environment the checkpoint was trained on, rebuilt from its spec.
+
+        Raises:
+            CheckpointError: for a missing, corrupt, unsafe or incompatible checkpoint.
+        """
+        from mope.agent import agent_class
+
+        data = load_checkpoint(path)
+        try:
+            config = Config.from_dict(data["config"])
+        except MopeError as exc:
+            raise CheckpointError(f"checkpoint '{path}' holds an invalid config: {exc}") from None
+        if overrides:
+            config = Config.from_dict({**config.to_dict(), **overrides})  # a bad override is the caller's error
+        variant = getattr(cls, "variant", None)
+        if getattr(cls, "strict_variant", False) and config.algo != variant:
+            raise CheckpointError(f"checkpoint '{path}' holds a '{config.algo}' agent, not '{variant}'; "
+                                  f"load it with MoPE.load")
+        agent_cls = agent_class(config.algo)
+        if env is None and "env_id" not in overrides:
+            env = rebuild_env(data.get("env") or {}, config, path)  # type: ignore[assignment]
+        agent = agent_cls(env if env is not None else config.env_id, config)
+        check_compatible(data, path, agent.config.env_id, agent.m, agent.n_actions, tuple(agent.obs_shape),
+                         same_env="env_id" not in overrides)
+        try:
+            agent.load_state_dict(data)
+        except (RuntimeError, KeyError) as exc:
+            first = str(exc).splitlines()[0]
+            raise CheckpointError(f"checkpoint '{path}' does not fit its config: {first}") from None
+        return agent
+
+    def load_state_dict(self, data: dict[str, Any]) -> None:
+        """Restore networks, optimizers, counts, step counters, RNG states and (if present) the replay buffer."""
+        a: Any = self
+        a.q_net.load_state_dict(data["q_net"])
+        a.target_net.load_state_dict(data["target_net"])
+        a.optimizer.load_state_dict(data["optimizer"])
+        if a.discriminator is not None and "discriminator" in data:
+            a.discriminator.load_state_dict(data["discriminator"])
+            a.disc_optimizer.load_state_dict(data["disc_optimizer"])
+        a.pref_sampler.load_state_dict(data["preference_sampler"])
+        a.global_step = int(data["global_step"])
+        a.episodes = int(data["episodes"])
+        a.rng.bit_generator.state = data["rng"]
+        torch.set_rng_state(data["torch_rng"])
+        a.wall_s = float(data.get("wall_s", 0.0))
+        if "buffer" in data:
+            a.buffer.load_state_dict({k: v.numpy() if isinstance(v, torch.Tensor) else v
+                                      for k, v in data["buffer"].items()})
+            a.last_losses = dict(data.get("last_losses", {}))
+        if "episode" in data:
+            a._restore_episode(data["episode"]["pref"].numpy(), data["episode"]["actions"].tolist())
+
+    def _restore_episode(self, pref: np.ndarray, actions: list[int]) -> None:
+        """Rebuild the episode in progress by replaying its actions from its seeded reset (no RNG draws)."""
+        a: Any = self
+        a._obs, _ = a.env.reset(seed=a.config.seed + a.episodes)
+        for act in actions:
+            a._obs, *_ = a.env.step(int(act))
+        a._pref = np.asarray(pref, dtype=np.float64)
+        a._episode_actions = [int(act) for act in actions]
+
+    def __repr__(self) -> str:
+        a: Any = self
+        return f"{type(self).__name__}(env={a.config.env_id!r}, algo={a.algo!r}, step={a.global_step})"

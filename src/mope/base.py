@@ -1,0 +1,138 @@
+"""Acting and collecting experience: the half of an agent that does not learn (Stable-Baselines3's policy side).
+
+:class:`BaseAgent` is the base class of :class:`mope.agent.MoPE`. It acts (greedy or epsilon-greedy, batched),
+steps the training environment and stores transitions (:meth:`BaseAgent.collect_step`), and hands the training
+loop to :mod:`mope.runner`. The subclass builds the networks, the replay buffer and the preference sampler, and
+learns.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+from mope.agent_state import AgentState
+from mope.errors import MopeError
+from mope.preferences import validate_preference
+
+
+def linear_schedule(start: float, end: float, duration: int, step: int) -> float:
+    """Linear interpolation from ``start`` to ``end`` over ``duration`` steps, then constant."""
+    frac = min(1.0, step / max(1, duration))
+    return start + frac * (end - start)
+
+
+class BaseAgent(AgentState):
+    """Acting, collection and the training entry point of a preference-conditioned Q agent."""
+
+    q_net: torch.nn.Module
+    n_actions: int
+    m: int
+    obs_shape: tuple[int, ...]
+    device: torch.device
+    rng: np.random.Generator
+    global_step: int
+
+    @property
+    def algo(self) -> str:
+        """``eql``, ``ee``, ``pe`` or ``mope``."""
+        return self.config.algo
+
+    @property
+    def epsilon(self) -> float:
+        """Current exploration rate."""
+        c = self.config
+        return linear_schedule(c.epsilon_start, c.epsilon_end, c.epsilon_decay_steps, self.global_step)
+
+    def _tensor(self, x: np.ndarray, dtype: torch.dtype = torch.float32) -> torch.Tensor:
+        return torch.as_tensor(np.asarray(x), dtype=dtype, device=self.device)
+
+    @torch.inference_mode()
+    def q_values(self, obs: np.ndarray, prefs: np.ndarray) -> np.ndarray:
+        """Vector Q-values ``(n, |A|, m)`` for a batch (no input checks; used by diagnostics)."""
+        return self.q_net(self._tensor(obs), self._tensor(prefs)).cpu().numpy()
+
+    @torch.inference_mode()
+    def greedy_actions(self, obs: np.ndarray, prefs: np.ndarray) -> np.ndarray:
+        """Greedy actions ``argmax_a w^T Q(s, a, w)`` for a batch (no input checks; used in rollouts)."""
+        w = self._tensor(prefs)
+        q = self.q_net(self._tensor(obs), w)
+        return torch.einsum("bm,bam->ba", w, q).argmax(dim=1).cpu().numpy()
+
+    def act(self, obs: Any, pref: Any, greedy: bool = True) -> int | np.ndarray:
+        """Choose actions under a preference.
+
+        Args:
+            obs: One observation, or a batch of them.
+            pref: One preference of length m (e.g. ``[0.3, 0.7]``), or one per observation.
+            greedy: Greedy if True, else epsilon-greedy with the current epsilon: each observation explores with
+                probability epsilon (one uniform draw each), and an exploring one takes a uniform random action.
+
+        Returns:
+            An ``int`` for one observation, an array for a batch.
+        """
+        obs = np.asarray(obs)
+        single = obs.shape == tuple(self.obs_shape)
+        obs_b = obs.reshape(1, *self.obs_shape) if single else obs
+        prefs = np.atleast_2d(validate_preference(pref, self.m))
+        if len(prefs) == 1 and len(obs_b) > 1:
+            prefs = np.repeat(prefs, len(obs_b), axis=0)
+        if len(prefs) != len(obs_b):
+            raise MopeError(f"got {len(obs_b)} observations but {len(prefs)} preferences")
+        actions = np.zeros(len(obs_b), dtype=np.int64)
+        explore = np.zeros(len(obs_b), dtype=bool)
+        if not greedy:
+            explore = self.rng.random(len(obs_b)) < self.epsilon
+            actions[explore] = self.rng.integers(0, self.n_actions, int(explore.sum()))
+        if not explore.all():
+            actions[~explore] = self.greedy_actions(obs_b[~explore], prefs[~explore])
+        return int(actions[0]) if single else actions
+
+    # ---------------------------------------------------------------------------------------------------------
+    # collection
+    # ---------------------------------------------------------------------------------------------------------
+    def collect_step(self) -> None:
+        """Step 1: one epsilon-greedy environment step under the episode's preference, stored in the buffer."""
+        if self._obs is None:
+            self._start_episode()
+        obs, pref = self._obs, self._pref
+        action = self.act(obs, pref, greedy=False)
+        next_obs, reward, terminated, truncated, _ = self.env.step(action)
+        self.buffer.add(obs, pref, action, np.asarray(reward, dtype=np.float32), next_obs, terminated)
+        self._obs = next_obs
+        self._episode_actions.append(action)
+        self.global_step += 1
+        if terminated or truncated:
+            self.episodes += 1
+            self._start_episode()
+
+    def _start_episode(self) -> None:
+        """Reset the training env (seeded by the episode count) and draw the episode's preference."""
+        self._obs, _ = self.env.reset(seed=self.config.seed + self.episodes)
+        self._pref = self.pref_sampler.sample(self.rng)
+        self._episode_actions = []
+
+    def train(self, total_timesteps: int | None = None, eval_env: gym.Env | None = None,
+              eval_every: int | None = None, callback: Any = None, progress: bool = False
+              ) -> list[dict[str, float]]:
+        """Train for ``total_timesteps`` environment steps (default ``config.total_steps``).
+
+        Args:
+            total_timesteps: Steps to run now (training continues from ``global_step``).
+            eval_env: If given, evaluate with the paper's protocol every ``eval_every`` steps and at the end.
+            eval_every: Default ``config.run.eval_every``.
+            callback: A :class:`mope.runner.Callback` (or a list of them) called at every step.
+            progress: Show a progress bar with the latest CR.
+
+        The episode in progress carries over from one call to the next, so ``train(500)`` twice equals
+        ``train(1000)`` (evaluations aside).
+
+        Returns:
+            The evaluation records (step, wall seconds and every metric of :class:`~mope.evaluation.Evaluator`).
+        """
+        from mope.runner import train_with_evaluation
+
+        return train_with_evaluation(self, total_timesteps, eval_env, eval_every, callback, progress)

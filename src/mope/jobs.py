@@ -1,0 +1,318 @@
+"""The one runner for batches of training jobs: local processes or Ray, resumable, errors kept per job.
+
+A :class:`Job` is a named unit of work with a folder of its own (``<out>/<name>``): ``train`` (one mope run,
+from a config; it resumes from ``checkpoints/resume.pt``) or ``ppo`` (one PPO policy of the outer-loop
+baseline). :func:`run_jobs` runs a list of them and reports each outcome; ``mope sweep``, ``mope reproduce dst``
+and ``mope reproduce confrontation`` all go through it, so they share resumption, the Ray backend, the handling
+of a crashed worker and ``error.txt`` per failed job.
+
+Backends: ``local`` runs jobs in a process pool (forkserver); ``ray`` runs them as Ray tasks on a local
+instance or a cluster (``address``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import multiprocessing
+import os
+import time
+import traceback
+from collections.abc import Callable
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from mope.errors import ConfigError, MopeError, suggest
+
+BACKENDS = ("local", "ray")
+RAY_MISSING = "the ray backend needs Ray: pip install 'mope[ray]'"
+#: Written into every batch folder; a Ray task that sees it runs its job in place (a shared filesystem).
+BATCH_MARKER = ".mope-batch"
+
+
+class JobError(MopeError):
+    """A batch of jobs cannot be run as asked."""
+
+
+@dataclass
+class Job:
+    """One unit of work: ``kind`` (``train`` or ``ppo``), its settings, and its folder name under the batch folder."""
+
+    name: str
+    kind: str
+    payload: dict[str, Any]
+
+
+# ------------------------------------------------------------------------------------------------------------
+# job kinds: (payload, folder) -> final metrics; each resumes or skips what is already there
+# ------------------------------------------------------------------------------------------------------------
+def _train_job(payload: dict[str, Any], out: Path) -> dict[str, Any]:
+    """A mope run (``payload`` is a config dict): resumed from resume.pt, started over if it has none yet."""
+    from mope.config import Config
+    from mope.experiments import train_run
+
+    train_run(Config.from_dict(payload), out, progress=False, overwrite=True, resume=True)
+    return json.loads((out / "summary.json").read_text()).get("final", {})
+
+
+def _ppo_job(payload: dict[str, Any], out: Path) -> dict[str, Any]:
+    """One PPO policy on ``w^T r`` (:func:`mope.baselines.train_ppo`), saved as ``policy.zip``."""
+    import torch
+
+    from mope.baselines import train_ppo
+
+    meta = {k: payload[k] for k in ("pref", "steps", "seed", "env_id")}
+    out.mkdir(parents=True, exist_ok=True)
+    if (out / "summary.json").is_file():
+        saved = json.loads((out / "summary.json").read_text())
+        if saved.get("meta") == meta:
+            return saved.get("final", {})
+        raise ConfigError(f"'{out}' holds a PPO policy trained with {saved.get('meta')}, not {meta}; use another --out")
+    torch.set_num_threads(1)
+    t0 = time.perf_counter()
+    model = train_ppo(payload["pref"], payload["steps"], payload["seed"], env_id=payload["env_id"],
+                      device=payload.get("device", "cpu"))
+    model.save(out / "policy.zip")
+    final = {"wall_s": time.perf_counter() - t0}
+    (out / "summary.json").write_text(json.dumps({"meta": meta, "final": final}) + "\n")  # marks the job done
+    return final
+
+
+JOB_KINDS: dict[str, Callable[[dict[str, Any], Path], dict[str, Any]]] = {"train": _train_job, "ppo": _ppo_job}
+
+
+def job_done(job: Job, out: Path) -> bool:
+    """True when the job's folder holds its finished result (``summary.json``)."""
+    return (out / job.name / "summary.json").is_file()
+
+
+def run_job(name: str, kind: str, payload: dict[str, Any], out_dir: str) -> dict[str, Any]:
+    """Worker: run, resume or skip one job; never raises for a failed job (the failure is recorded instead)."""
+    import torch
+
+    torch.set_num_threads(max(1, int(payload.get("torch_threads") or 1)))
+    out = Path(out_dir)
+    t0 = time.perf_counter()
+    done = (out / "summary.json").is_file()
+    resumable = (out / "checkpoints" / "resume.pt").is_file()
+    action = "skipped" if done else "resumed" if resumable else "trained"
+    try:
+        (out / "error.txt").unlink(missing_ok=True)
+        final = JOB_KINDS[kind](payload, out)
+        return {"name": name, "status": "finished", "action": action, "final": final,
+                "wall_s": time.perf_counter() - t0, "error": None}
+    except Exception as exc:  # noqa: BLE001 - any failure of one job is recorded, the batch goes on
+        with contextlib.suppress(OSError):  # the folder itself may be what failed; the record keeps the error
+            out.mkdir(parents=True, exist_ok=True)
+            (out / "error.txt").write_text(traceback.format_exc())
+        return {"name": name, "status": "failed", "action": "failed", "final": {},
+                "wall_s": time.perf_counter() - t0, "error": f"{type(exc).__name__}: {exc}"}
+
+
+def run_job_remote(name: str, kind: str, payload: dict[str, Any], out_dir: str) -> dict[str, Any]:
+    """Ray task: :func:`run_job`, in place when this node sees the batch folder (a shared filesystem).
+
+    Otherwise (a worker node or Ray Client cluster without the driver's filesystem) the job runs in a temporary
+    folder and comes back packed in ``rec["archive"]`` (a gzipped tar, without the resume checkpoint), for the
+    driver to unpack into the batch folder.
+    """
+    import io
+    import tarfile
+    import tempfile
+
+    if (Path(out_dir).parent / BATCH_MARKER).is_file():
+        return run_job(name, kind, payload, out_dir)
+    with tempfile.TemporaryDirectory(prefix="mope-job-") as tmp:
+        rec = run_job(name, kind, payload, str(Path(tmp) / name))
+        buf = io.BytesIO()
+        with tarfile.open(fileobj=buf, mode="w:gz") as tar:
+            tar.add(Path(tmp) / name, arcname=name,
+                    filter=lambda info: None if info.name.endswith(("resume.pt", "interrupted.pt")) else info)
+        rec["archive"] = buf.getvalue()
+    return rec
+
+
+def unpack_job(rec: dict[str, Any], out: Path) -> None:
+    """Unpack a job folder that a Ray task sent back (see :func:`run_job_remote`) into the batch folder."""
+    import io
+    import tarfile
+
+    archive = rec.pop("archive", None)
+    if archive is None:
+        return
+    with tarfile.open(fileobj=io.BytesIO(archive), mode="r:gz") as tar:
+        names = tar.getnames()
+        if any((n != rec["name"] and not n.startswith(rec["name"] + "/")) or ".." in Path(n).parts for n in names):
+            raise JobError(f"the archive of job '{rec['name']}' holds files outside its folder")
+        safe = {"filter": "data"} if hasattr(tarfile, "data_filter") else {}  # Python >= 3.11.4
+        tar.extractall(out, **safe)
+
+
+# ------------------------------------------------------------------------------------------------------------
+# backends
+# ------------------------------------------------------------------------------------------------------------
+def _init_worker() -> None:
+    import torch
+
+    torch.set_num_threads(1)
+
+
+class _Summary:
+    """The live line: a bar over jobs with done / running / failed / skipped counts."""
+
+    def __init__(self, total: int, done: int, enabled: bool, desc: str) -> None:
+        from tqdm.auto import tqdm
+
+        self.done, self.failed, self.skipped, self.running = done, 0, done, 0
+        self.bar = tqdm(total=total, initial=done, desc=desc, unit="job", disable=not enabled)
+        self.refresh()
+
+    def refresh(self, redraw: bool = True) -> None:
+        self.bar.set_postfix_str(f"done {self.done}, running {self.running}, failed {self.failed}, "
+                                 f"skipped {self.skipped}", refresh=redraw)
+
+    def finished(self, rec: dict[str, Any]) -> None:
+        if rec["status"] == "failed":
+            self.failed += 1
+            self.bar.write(f"job {rec['name']} failed: {rec['error']}")
+        else:
+            self.done += 1
+            self.skipped += rec["action"] == "skipped"
+        self.running = max(0, self.running - 1)
+        self.refresh(redraw=False)
+        self.bar.update(1)
+
+    def set_running(self, n: int) -> None:
+        if n != self.running:
+            self.running = n
+            self.refresh()
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def _local_backend(jobs: list[tuple[str, str, dict[str, Any], str]], workers: int,
+                   on_done: Callable[[dict[str, Any]], None], on_running: Callable[[int], None]) -> None:
+    method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context(method),
+                               initializer=_init_worker)
+    try:
+        pending: set[Future] = {pool.submit(run_job, *job) for job in jobs}
+        while pending:
+            finished, pending = wait(pending, timeout=1.0, return_when=FIRST_COMPLETED)
+            for fut in finished:
+                try:
+                    on_done(fut.result())
+                except BrokenProcessPool as exc:  # a worker was killed (OOM killer, signal): not a job error
+                    raise JobError(f"a job process died ({exc}); run the same command again to resume "
+                                   "the unfinished jobs") from None
+            on_running(min(workers, sum(f.running() for f in pending)))
+    except BaseException:
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)
+
+
+def _ray_backend(jobs: list[tuple[str, str, dict[str, Any], str]], out: Path, workers: int | None,
+                 address: str | None, on_done: Callable[[dict[str, Any]], None],
+                 on_running: Callable[[int], None]) -> None:
+    import ray
+
+    started = False
+    if not ray.is_initialized():
+        # a local instance sized to --workers; a cluster (or Ray Client, ray://) takes only its address
+        kwargs: dict[str, Any] = {"address": address} if address is not None else \
+            {"include_dashboard": False, "log_to_driver": False, "num_cpus": workers}
+        try:
+            ray.init(**kwargs)
+        except (ConnectionError, ValueError, RuntimeError) as exc:
+            raise JobError(f"could not connect to Ray at address={address!r}: {exc}") from None
+        started = True
+    try:
+        slots = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
+        remote = ray.remote(num_cpus=1, max_retries=0)(run_job_remote)
+        queue, pending = list(jobs), []
+        while queue or pending:
+            while queue and len(pending) < slots:  # keep at most `slots` jobs in flight
+                pending.append(remote.remote(*queue.pop(0)))
+            ready, pending = ray.wait(pending, num_returns=1, timeout=1.0)
+            for ref in ready:
+                rec = ray.get(ref)
+                unpack_job(rec, out)
+                on_done(rec)
+            on_running(len(pending))
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def check_backend(backend: str, address: str | None, workers: int | None) -> None:
+    """Raise :class:`JobError` for an unknown backend, an address without Ray, a bad worker count or no Ray."""
+    if backend not in BACKENDS:
+        raise JobError(f"unknown backend '{backend}'{suggest(backend, BACKENDS)}; choose one of {', '.join(BACKENDS)}")
+    if address is not None and backend != "ray":
+        raise JobError(f"--address {address} needs --backend ray")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise JobError(f"workers={workers!r} is out of range: must be >= 1")
+    if backend == "ray":
+        try:
+            import ray  # noqa: F401
+        except ImportError:
+            raise JobError(RAY_MISSING) from None
+
+
+def run_jobs(jobs: list[Job], out: Path, backend: str = "local", workers: int | None = None,
+             address: str | None = None, progress: bool = True, desc: str = "jobs",
+             on_done: Callable[[dict[str, Any]], None] | None = None) -> dict[str, dict[str, Any]]:
+    """Run every job into ``out/<job.name>``; finished ones are skipped, interrupted ones resumed.
+
+    Args:
+        jobs: The jobs (unique names).
+        out: The batch folder.
+        backend: ``local`` or ``ray``.
+        workers: Jobs at once (default: every core, or every cluster CPU for Ray).
+        address: Ray cluster address (``auto``, ``ray://host:10001``); only for the ray backend.
+        progress: Show the live line.
+        desc: Its label.
+        on_done: Called with each job's record as it finishes (skipped ones included).
+
+    Returns:
+        Job name -> ``{"name", "status", "action", "final", "wall_s", "error"}``.
+    """
+    check_backend(backend, address, workers)
+    for job in jobs:
+        if job.kind not in JOB_KINDS:
+            raise JobError(f"job '{job.name}' has unknown kind '{job.kind}'")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / BATCH_MARKER).write_text("a folder of mope jobs\n")
+    records: dict[str, dict[str, Any]] = {}
+    for job in jobs:
+        if job_done(job, out) and job.kind == "train":
+            final = json.loads((out / job.name / "summary.json").read_text()).get("final", {})
+            records[job.name] = {"name": job.name, "status": "finished", "action": "skipped", "final": final,
+                                 "wall_s": 0.0, "error": None}
+            if on_done is not None:
+                on_done(records[job.name])
+    todo = [(j.name, j.kind, j.payload, str(out / j.name)) for j in jobs if j.name not in records]
+    summary = _Summary(len(jobs), len(records), progress, desc)
+
+    def done(rec: dict[str, Any]) -> None:
+        records[rec["name"]] = rec
+        summary.finished(rec)
+        if on_done is not None:
+            on_done(rec)
+
+    try:
+        if todo and backend == "local":
+            _local_backend(todo, min(workers or os.cpu_count() or 1, len(todo)), done, summary.set_running)
+        elif todo:
+            _ray_backend(todo, out, workers, address, done, summary.set_running)
+    finally:
+        summary.close()
+    return records
+
+
+__all__ = ["BACKENDS", "JOB_KINDS", "Job", "JobError", "check_backend", "run_job", "run_jobs", "unpack_job"]

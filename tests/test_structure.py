@@ -1,0 +1,236 @@
+"""The agent's seams and the run machinery (issue 13): variants from one config, collect/update/callbacks,
+interval statistics in the logs, folder locks, `--set` with several pairs, `--resume` before the first
+checkpoint, checkpoints that rebuild a wrapped environment, and reproductions through the job runner."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import mo_gymnasium as mo_gym
+import numpy as np
+import pytest
+
+import mope
+from mope import EQL, CheckpointError, Config, ConfigError, MoPE
+from mope.cli import expand_set_args
+from mope.experiments import train_run
+from mope.locks import LOCK_NAME, FolderLock, FolderLockedError
+from mope.runner import Callback, IntervalStats, train
+
+SMALL = {"hidden_sizes": (16, 16), "n_omega": 4, "batch_size": 8, "learning_starts": 20, "buffer_size": 500,
+         "disc_hidden": (8,)}
+
+
+def cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    env = {**os.environ, "COLUMNS": "300", "TERM": "dumb"}
+    return subprocess.run([sys.executable, "-m", "mope.cli", *args], capture_output=True, text=True, cwd=cwd,
+                          timeout=600, env=env)
+
+
+# ------------------------------------------------------------------------------------------- variants
+def test_eql_refuses_a_config_of_another_variant() -> None:
+    with pytest.raises(ConfigError, match="EQL needs a config of algorithm 'eql', got 'mope'"):
+        EQL("deep-sea-treasure-v0", Config())
+    agent = EQL("deep-sea-treasure-v0", Config.for_algo("eql", **SMALL))
+    assert agent.algo == "eql" and agent.discriminator is None and not agent.pref_sampler.exploration
+    assert type(mope.make_agent("eql", "deep-sea-treasure-v0", **SMALL)) is EQL
+    assert type(mope.make_agent("pe", "deep-sea-treasure-v0", **SMALL)) is MoPE
+
+
+def test_load_returns_the_saved_variant_and_eql_load_refuses_others(tmp_path: Path) -> None:
+    EQL("deep-sea-treasure-v0", **SMALL).save(tmp_path / "eql.pt")
+    MoPE("deep-sea-treasure-v0", **SMALL).save(tmp_path / "mope.pt")
+    assert type(MoPE.load(tmp_path / "eql.pt")) is EQL
+    assert type(EQL.load(tmp_path / "eql.pt")) is EQL
+    assert type(MoPE.load(tmp_path / "mope.pt")) is MoPE
+    with pytest.raises(CheckpointError, match="holds a 'mope' agent, not 'eql'"):
+        EQL.load(tmp_path / "mope.pt")
+
+
+def test_run_settings_are_separate_from_hyperparameters() -> None:
+    c = Config(eval_prefs=100, seed=3)
+    assert c.run.eval_prefs == 100 and "eval_prefs" not in Config.hyperparameter_names()
+    assert c.to_dict()["eval_prefs"] == 100 and Config.from_dict(c.to_dict()) == c
+    assert Config.from_dict({**c.to_dict(), "extra": {}}) == c  # configs of older versions still load
+
+
+# ------------------------------------------------------------------------------------------- seams
+def test_collect_step_acts_through_act_and_update_returns_its_statistics(monkeypatch: pytest.MonkeyPatch) -> None:
+    agent = MoPE("deep-sea-treasure-v0", **SMALL)
+    calls = []
+    original = MoPE.act
+
+    def spy(self: MoPE, obs: object, pref: object, greedy: bool = True) -> object:
+        calls.append(greedy)
+        return original(self, obs, pref, greedy)
+
+    monkeypatch.setattr(MoPE, "act", spy)
+    for _ in range(30):
+        agent.collect_step()
+    assert calls == [False] * 30 and agent.global_step == 30 and len(agent.buffer) == 30
+    stats = agent.update()
+    assert stats is agent.last_losses
+    assert {"loss", "loss_a", "loss_b", "td_abs", "q_mean", "q_max", "mi_bonus", "disc_loss"} <= set(stats)
+    assert all(np.isfinite(v) for v in stats.values())
+
+
+def test_one_callback_object_sees_every_step_and_can_stop() -> None:
+    agent = EQL("deep-sea-treasure-v0", **SMALL)
+
+    class Recorder(Callback):
+        def __init__(self) -> None:
+            self.steps: list[int] = []
+            self.updates = 0
+            self.ended: bool | None = None
+
+        def on_step(self, agent: MoPE, stats: dict | None) -> bool:
+            self.steps.append(agent.global_step)
+            self.updates += stats is not None
+            return agent.global_step < 50
+
+        def on_training_end(self, agent: MoPE, stopped: bool) -> None:
+            self.ended = stopped
+
+    rec = Recorder()
+    assert train(agent, 100, rec) is False
+    assert rec.steps == list(range(1, 51)) and rec.ended is True
+    assert rec.updates == 50 - SMALL["learning_starts"]
+
+
+def test_interval_statistics_average_the_updates() -> None:
+    agent = EQL("deep-sea-treasure-v0", **SMALL)
+    rows: list[dict] = []
+    train(agent, 60, IntervalStats(20, rows.append))
+    assert [r["step"] for r in rows] == [40, 60]  # no update before step 21: nothing to log at step 20
+    assert rows[0]["updates"] == 20 and {"loss_a", "loss_b", "td_abs", "q_mean", "q_max"} <= set(rows[0])
+
+
+@pytest.mark.slow
+def test_interval_statistics_reach_the_run_folder_logs(tmp_path: Path) -> None:
+    cfg = Config.for_algo("mope", **SMALL, total_steps=300, eval_every=150, eval_prefs=20, log_every=50,
+                          checkpoint_every=0)
+    train_run(cfg, tmp_path / "run", progress=False)
+    with open(tmp_path / "run" / "train_stats.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [int(r["step"]) for r in rows] == [50, 100, 150, 200, 250, 300]
+    assert all(float(r["updates"]) > 0 for r in rows[1:]) and float(rows[-1]["mi_bonus"]) == float(
+        rows[-1]["mi_bonus"])  # not NaN for MoPE
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    events = EventAccumulator(str(tmp_path / "run" / "tb"))
+    events.Reload()
+    tags = set(events.Tags()["scalars"])
+    assert {"train/loss_a", "train/td_abs", "train/q_max", "train/mi_bonus", "eval/cr"} <= tags
+
+
+# ------------------------------------------------------------------------------------------- locks
+def test_a_second_writer_is_refused_and_a_stale_lock_is_taken_over(tmp_path: Path) -> None:
+    folder = tmp_path / "run"
+    sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        folder.mkdir()
+        (folder / LOCK_NAME).write_text(json.dumps({"pid": sleeper.pid, "host": os.uname().nodename}))
+        with pytest.raises(FolderLockedError, match=f"in use by process {sleeper.pid}"):
+            FolderLock(folder, "run folder").acquire()
+        cfg = Config.for_algo("eql", **SMALL, total_steps=30, eval_every=0, eval_prefs=5, checkpoint_every=0)
+        with pytest.raises(FolderLockedError):
+            train_run(cfg, folder, progress=False, overwrite=True)
+        res = cli("train", "--algo", "eql", "--steps", "30", "--out", str(folder), "--overwrite", "--no-progress")
+        assert res.returncode == 2 and "is in use by process" in res.stderr and "Traceback" not in res.stderr
+    finally:
+        sleeper.kill()
+        sleeper.wait()
+    # the holder is gone: its lock is stale and the next writer takes it over
+    with FolderLock(folder, "run folder"):
+        assert json.loads((folder / LOCK_NAME).read_text())["pid"] == os.getpid()
+    assert not (folder / LOCK_NAME).exists()
+
+
+# ------------------------------------------------------------------------------------------- command line
+def test_one_set_takes_several_pairs() -> None:
+    assert expand_set_args(["train", "--set", "a=1", "b=2", "--steps", "5"]) == \
+        ["train", "--set", "a=1", "--set", "b=2", "--steps", "5"]
+    assert expand_set_args(["sweep", "spec.yaml", "--set=a=1", "b=[1, 2]"]) == \
+        ["sweep", "spec.yaml", "--set=a=1", "--set", "b=[1, 2]"]
+    res = cli("train", "--set", "batch_size=8", "n_omegaa=3", "--steps", "10")
+    assert res.returncode == 2 and "unknown config key 'n_omegaa'" in res.stderr  # the second pair was read
+
+
+def test_train_help_shows_every_default() -> None:
+    res = cli("train", "--help")
+    for text in ("default: deep-sea-treasure-v0", "default: 20000", "default: 0]", "default: 1000",
+                 "default: 2000", "default: 0.04", "default: 0.1", "default: 10", "default: cpu"):
+        assert text in " ".join(res.stdout.replace("│", " ").split()), text
+
+
+@pytest.mark.slow
+def test_resume_of_a_run_killed_before_its_first_checkpoint_starts_it_over(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    out.mkdir()
+    cfg = Config.for_algo("eql", **SMALL, total_steps=60, eval_every=0, eval_prefs=10, checkpoint_every=1000)
+    cfg.save(out / "config.json")
+    res = cli("train", "--resume", str(out), "--no-progress")
+    assert res.returncode == 0, res.stderr
+    assert "no checkpoint yet" in res.stderr and "starting it over" in res.stderr
+    assert (out / "summary.json").is_file()
+    # the same from Python
+    (out / "summary.json").unlink()
+    for f in (out / "checkpoints").glob("*.pt"):
+        f.unlink()
+    assert train_run(cfg, out, progress=False, resume=True).agent.global_step == 60
+
+
+# ------------------------------------------------------------------------------------------- checkpoints
+def test_a_checkpoint_rebuilds_the_wrapped_environment_it_was_trained_on(tmp_path: Path) -> None:
+    from mope.envs import DiscreteActions
+    from mope.envs.confrontation import RobotConfrontationEnv
+
+    env = DiscreteActions(mo_gym.make("mope/RobotConfrontation-v0"), bins=3)
+    MoPE(env, **SMALL).save(tmp_path / "wrapped.pt")
+    back = MoPE.load(tmp_path / "wrapped.pt")
+    assert isinstance(back.env, DiscreteActions) and back.env.action_space.n == 9
+    hand = MoPE(DiscreteActions(RobotConfrontationEnv(), bins=3), **SMALL)
+    assert hand.config.env_id == "RobotConfrontationEnv"
+    hand.save(tmp_path / "hand.pt")
+    with pytest.raises(CheckpointError, match="cannot be rebuilt .* MoPE.load\\(path, env=your_env\\)"):
+        MoPE.load(tmp_path / "hand.pt")
+    assert MoPE.load(tmp_path / "hand.pt", env=DiscreteActions(RobotConfrontationEnv(), bins=3)).n_actions == 9
+
+
+# ------------------------------------------------------------------------------------------- job runner
+@pytest.mark.slow
+def test_an_interrupted_reproduction_resumes_through_the_job_runner(tmp_path: Path, monkeypatch) -> None:
+    import signal
+
+    import mope.experiments as experiments
+    from mope.reproduce import dst_jobs, reproduce_dst, run_name
+
+    tiny = {**SMALL, "eval_prefs": 50, "checkpoint_every": 100}
+    out = tmp_path / "repro"
+    job = dst_jobs(1, 300, 150, ("eql",), **tiny)[0]
+    original = experiments.train
+
+    class SigintAt200(Callback):
+        def on_step(self, agent: MoPE, stats: object) -> bool:
+            if agent.global_step == 200:
+                signal.raise_signal(signal.SIGINT)
+            return True
+
+    monkeypatch.setattr(experiments, "train", lambda a, n, cbs: original(a, n, [SigintAt200(), *cbs]))
+    with pytest.raises(KeyboardInterrupt):
+        train_run(Config.from_dict(job.payload), out / run_name("eql", 0), progress=False)
+    monkeypatch.setattr(experiments, "train", original)
+    res = reproduce_dst(out, seeds=1, steps=300, eval_every=150, algos=("eql",), workers=1, progress=False, **tiny)
+    assert res["records"]["eql-s0"]["action"] == "resumed"
+    train_run(Config.from_dict(job.payload), tmp_path / "straight", progress=False)
+    assert _rows(out / "eql-s0") == _rows(tmp_path / "straight")  # resumed = uninterrupted, row for row
+
+
+def _rows(folder: Path) -> list[dict[str, str]]:
+    with open(folder / "metrics.csv") as f:
+        return [{k: v for k, v in r.items() if k != "wall_s"} for r in csv.DictReader(f)]

@@ -22,11 +22,18 @@ def test_variants_have_the_right_switches():
         assert agent.pref_sampler.exploration == (algo in ("pe", "mope"))
 
 
-def test_q_network_follows_the_paper():
-    agent = MoPE("deep-sea-treasure-v0")
+def test_q_network_follows_the_paper_in_the_paper_preset():
+    agent = MoPE("deep-sea-treasure-v0", Config.from_dict({"preset": "paper"}))
     widths = [layer.out_features for layer in agent.q_net.net if isinstance(layer, torch.nn.Linear)]
     assert widths == [64, 128, 128, 64, 4 * 2]  # four hidden layers, |A| x m outputs
     assert agent.config.n_omega == 64 and agent.config.sigma_omega == 0.04 and agent.config.n_intervals == 10
+
+
+def test_default_q_network_is_the_convex_head():
+    agent = MoPE("deep-sea-treasure-v0")
+    widths = [layer.out_features for layer in agent.q_net.net if isinstance(layer, torch.nn.Linear)]
+    assert widths == [256, 256, 256, 4 * 12 * 2]  # |A| x C x m outputs, no preference input
+    assert agent.q_net.net[0].in_features == 12 + 12  # DST's (row, col) in Box(0, 11), each one-hot ("auto")
 
 
 def test_act_single_and_batch_and_bad_preferences():
@@ -53,17 +60,24 @@ def test_relabel_eql_is_uniform_and_shared_ee_is_local():
     w = eql.relabel(acting)
     assert w.shape == (2, 8, 2)
     np.testing.assert_allclose(w[0], w[1])  # one uniform set for the whole batch (Yang et al.)
-    ee = mope.make_agent("ee", "deep-sea-treasure-v0", **SMALL)
+    ee = mope.make_agent("ee", "deep-sea-treasure-v0", **SMALL, relabel_broad=0.0)  # the paper's EE
     w = ee.relabel(acting)
     assert w.shape == (2, 8, 2)
     np.testing.assert_allclose(w[:, 0], acting)  # the transition's own preference comes first
     assert np.all(np.linalg.norm(w - acting[:, None], axis=-1) <= 0.04 + 1e-9)
     np.testing.assert_allclose(w.sum(-1), 1.0)
+    mixed = mope.make_agent("ee", "deep-sea-treasure-v0", **SMALL)  # default: half the rows from the whole simplex
+    w = mixed.relabel(acting)
+    assert w.shape == (2, 8, 2) and mixed.config.relabel_broad == 0.5
+    np.testing.assert_allclose(w[:, 0], acting)
+    near = np.linalg.norm(w - acting[:, None], axis=-1) <= 0.04 + 1e-9
+    assert near[:, :4].all() and not near[:, 4:].all()  # own + 3 neighbours, then 4 uniform preferences
+    np.testing.assert_allclose(w.sum(-1), 1.0)
 
 
 def test_update_fits_a_terminal_transition():
     """A buffer holding only the one-step transition to the 0.7 treasure: Q(s0, down, w) must approach [0.7, -1]."""
-    agent = EQL("deep-sea-treasure-v0", **{**SMALL, "per": False})
+    agent = EQL("deep-sea-treasure-v0", **{**SMALL, "per": False, "q_head": "conditioned", "obs_encoding": "scale"})
     for _ in range(64):
         agent.buffer.add(np.array([0, 0]), np.array([0.5, 0.5]), 1, np.array([0.7, -1.0]), np.array([1, 0]), True)
     prefs = torch.tensor([[0.1, 0.9], [0.5, 0.5], [0.9, 0.1]])

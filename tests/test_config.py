@@ -13,8 +13,8 @@ from mope.errors import ConfigError, MopeError
 
 
 # ------------------------------------------------------------------------------------------- defaults
-def test_defaults_match_the_paper() -> None:
-    c = Config()
+def test_paper_preset_matches_the_paper() -> None:
+    c = Config.from_dict({"preset": "paper"})
     assert c.n_omega == 64  # "we sample 64 preferences"
     assert c.sigma_omega == 0.04  # "sigma_omega = 0.04"
     assert c.n_intervals == 10  # "divided the preference space into 10 parts"
@@ -136,7 +136,7 @@ def test_out_of_range_raises_config_error_naming_field_and_value(changes: dict, 
 
 
 def test_batch_size_larger_than_buffer_message() -> None:
-    with pytest.raises(ConfigError, match=r"buffer_size=16 is out of range: must be >= batch_size \(32\)"):
+    with pytest.raises(ConfigError, match=r"buffer_size=16 is out of range: must be >= batch_size \(128\)"):
         Config(buffer_size=16)
 
 
@@ -249,3 +249,26 @@ def test_non_bool_exploration_switch_raises_config_error(value: object) -> None:
 def test_wrong_typed_values_raise_config_error(data: dict) -> None:
     with pytest.raises(ConfigError, match=next(iter(data))):
         Config.from_dict(data)
+
+
+# ------------------------------------------------------------------------------------------- presets
+#: The defaults of mope 0.1 (before the learning study), which the paper preset must reproduce exactly.
+OLD_DEFAULTS = {"q_head": "conditioned", "obs_encoding": "scale", "hidden_sizes": [64, 128, 128, 64],
+                "learning_rate": 1e-3, "learning_rate_end": None, "batch_size": 32, "target_tau": None,
+                "target_update_freq": 100, "max_grad_norm": 10.0, "n_omega": 64, "relabel_broad": 0.0,
+                "envelope_prefs": "relabel", "lb_homotopy_steps": 0, "learning_starts": 200, "gamma": 0.99,
+                "double_q": True, "clip_targets": True, "epsilon_decay_steps": 10_000, "epsilon_end": 0.05,
+                "per_alpha": 0.6, "sigma_omega": 0.04, "mi_alpha": 0.1, "n_intervals": 10, "buffer_size": 20_000,
+                "lb_weight": 1.0}
+
+
+def test_presets() -> None:
+    paper = Config.from_dict({"preset": "paper"}).to_dict()
+    assert {k: paper[k] for k in OLD_DEFAULTS} == OLD_DEFAULTS
+    env = Config.for_algo("eql", preset="envelope", seed=3)
+    assert env.hidden_sizes == (256,) * 4 and env.n_omega == 4 and env.max_grad_norm == 0.1
+    assert env.lb_homotopy_steps == 10_000 and env.target_update_freq == 1000 and env.seed == 3
+    assert Config.from_dict({"preset": "paper", "batch_size": 8}).batch_size == 8  # keys override the preset
+    assert Config.from_dict({"preset": "mope"}) == Config()
+    with pytest.raises(ConfigError, match="unknown preset 'papr' \\(did you mean 'paper'\\?\\)"):
+        Config.from_dict({"preset": "papr"})

@@ -38,7 +38,7 @@ def write_run(folder: Path, algo: str, seed: int, final: tuple[float, ...], tota
             row = {k: 0.0 for k in METRIC_COLUMNS}
             row.update(step=step, wall_s=1.0 + i, cr=cr * scale, hv=hv * scale, eum=eum * scale,
                        optimal_share=opt * scale, timeout_share=to * scale,
-                       igd=math.nan)  # no IGD in these hand-made runs: the report leaves an all-NaN metric out
+                       igd=math.nan, path_error=math.nan)  # the report leaves an all-NaN metric out
             w.writerow(row)
     with open(folder / "solutions.csv", "w", newline="") as f:
         w = csv.writer(f)
@@ -116,11 +116,11 @@ def test_mixed_configs_beyond_swept_fields_are_named(tmp_path: Path) -> None:
     write_sweep(tmp_path)
     write_run(tmp_path / "late-eql-s7", "eql", 7, FINAL["eql"][0], total_steps=400, learning_rate=5e-4)
     with pytest.raises(ReportError, match=r"beyond the seed and the swept fields \(algo\): total_steps: 300, 400; "
-                                          r"learning_rate: 0.0005, 0.001"):
+                                          r"learning_rate: 0.0003, 0.0005"):
         report(tmp_path, plots=False)
     res = report(tmp_path, plots=False, split_mismatched=True)
-    assert [g.label for g in res.groups] == ["eql total_steps=300 learning_rate=0.001",
-                                             "mope total_steps=300 learning_rate=0.001",
+    assert [g.label for g in res.groups] == ["eql total_steps=300 learning_rate=0.0003",
+                                             "mope total_steps=300 learning_rate=0.0003",
                                              "eql total_steps=400 learning_rate=0.0005"]
     assert [len(g.runs) for g in res.groups] == [4, 4, 1]
 

@@ -12,7 +12,7 @@ from typing import Annotated, Any
 
 import typer
 
-from mope.config import ALGOS, Config, check_algo, unknown_key_error
+from mope.config import ALGOS, PRESETS, Config, check_algo, check_preset, read_config_file, unknown_key_error
 from mope.errors import ConfigError, MopeError, one_line
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -33,6 +33,9 @@ def _parse_sets(items: list[str]) -> dict[str, Any]:
             raise ConfigError(f"--set '{item}' is not KEY=VALUE")
         key, raw = item.split("=", 1)
         key = key.strip().replace("-", "_")
+        if key == "preset":
+            out[key] = check_preset(raw.strip())
+            continue
         if key not in names:
             raise unknown_key_error(key)
         try:
@@ -58,8 +61,7 @@ def _default(name: str) -> str:
 
 @app.command()
 def train(
-    env: Annotated[str | None, typer.Option(help=f"Environment id (MO-Gymnasium) \\[default: {_default('env_id')}]")
-                   ] = None,
+    env: Annotated[str | None, typer.Option(help=f"Environment id \\[default: {_default('env_id')}]")] = None,
     algo: Annotated[str | None, typer.Option(help=f"Variant: {', '.join(ALGOS)} \\[default: mope]")] = None,
     steps: Annotated[int | None, typer.Option(help=f"Environment steps \\[default: {_default('total_steps')}]")] = None,
     seed: Annotated[int | None, typer.Option(help=f"Random seed \\[default: {_default('seed')}]")] = None,
@@ -79,6 +81,8 @@ def train(
     hidden: Annotated[str | None, typer.Option(
         help=f"Q-network hidden sizes \\[default: {_default('hidden_sizes')}]")] = None,
     device: Annotated[str | None, typer.Option(help=f"cpu, cuda or auto \\[default: {_default('device')}]")] = None,
+    preset: Annotated[str | None, typer.Option(
+        help=f"Named defaults: {', '.join(PRESETS)} (paper: the paper's settings) \\[default: mope]")] = None,
     config: Annotated[Path | None, typer.Option(help="JSON/YAML config file; flags override it.")] = None,
     set_: Annotated[list[str] | None, typer.Option(
         "--set", help="Any config field, one or several: --set batch_size=64 gamma=0.9.")] = None,
@@ -94,19 +98,18 @@ def train(
     run_dir = resume
     try:
         if resume is not None:
-            flags_given = (("--env", env), ("--algo", algo), ("--steps", steps), ("--seed", seed), ("--out", out),
-                           ("--config", config), ("--set", set_), ("--eval-every", eval_every),
-                           ("--eval-prefs", eval_prefs), ("--n-omega", n_omega), ("--sigma-omega", sigma_omega),
-                           ("--mi-alpha", mi_alpha), ("--n-intervals", n_intervals), ("--hidden", hidden),
-                           ("--overwrite", overwrite))
-            _resume(resume, [name for name, v in flags_given if v is not None and v is not False and v != []],
+            given = {"env": env, "algo": algo, "steps": steps, "seed": seed, "out": out, "config": config, "set": set_,
+                     "eval-every": eval_every, "eval-prefs": eval_prefs, "n-omega": n_omega, "sigma-omega": sigma_omega,
+                     "mi-alpha": mi_alpha, "n-intervals": n_intervals, "hidden": hidden, "overwrite": overwrite,
+                     "preset": preset}
+            _resume(resume, [f"--{k}" for k, v in given.items() if v is not None and v is not False and v != []],
                     device, progress)
             return
         flags = {"env_id": env, "total_steps": steps, "seed": seed, "eval_every": eval_every,
                  "eval_prefs": eval_prefs, "n_omega": n_omega, "sigma_omega": sigma_omega, "mi_alpha": mi_alpha,
                  "n_intervals": n_intervals, "device": device,
                  "hidden_sizes": _int_list("--hidden", hidden) if hidden is not None else None}
-        cfg = _config_from_cli(config, algo, flags, set_ or [])
+        cfg = _config_from_cli(config, algo, flags, set_ or [], preset)
         run_dir = out or Path("runs") / f"{cfg.env_id}-{cfg.algo}-s{cfg.seed}"
         result = train_run(cfg, run_dir, progress=progress, overwrite=overwrite)
     except MopeError as exc:
@@ -126,13 +129,21 @@ def _int_list(flag: str, text: str) -> list[int]:
         raise ConfigError(f"{flag} '{text}' is not a comma-separated list of integers") from None
 
 
-def _config_from_cli(config_file: Path | None, algo: str | None, flags: dict[str, Any], sets: list[str]) -> Config:
-    """Config file, then flags, then ``--set``; ``--algo`` (or the file's variant, else mope) sets the variant."""
-    base = Config.load(config_file) if config_file else Config()
-    variant = check_algo(algo or (base.algo if config_file else "mope"))
-    changes = {k: v for k, v in flags.items() if v is not None}
-    changes.update(_parse_sets(sets))
-    return base.with_algo(variant).replace(**changes)
+def _config_from_cli(config_file: Path | None, algo: str | None, flags: dict[str, Any], sets: list[str],
+                     preset: str | None = None) -> Config:
+    """Preset, then config file, then flags, then ``--set``; ``--algo`` (or the file's variant, else mope) sets the
+    variant."""
+    settings: dict[str, Any] = dict(read_config_file(config_file)) if config_file else {}
+    file_algo = settings.pop("algo", None)
+    if preset is not None:
+        settings["preset"] = preset
+    settings.update({k: v for k, v in flags.items() if v is not None})
+    settings.update(_parse_sets(sets))
+    variant = check_algo(algo or file_algo or ("mope" if not config_file else
+                                                Config.from_dict(settings).algo))
+    for key in ("experience_exploration", "preference_exploration"):
+        settings.pop(key, None)
+    return Config.for_algo(variant, **settings)
 
 
 def _resume(run_dir: Path, given: list[str], device: str | None, progress: bool) -> None:
@@ -223,6 +234,34 @@ def act(
     typer.echo(f"return: [{fmt(f'{x:.4g}' for x in sols.returns[0])}]")
     typer.echo(f"discounted return: [{fmt(f'{x:.4g}' for x in sols.discounted[0])}]")
     typer.echo(f"length: {int(sols.lengths[0])}{'' if sols.terminated[0] else ' (time limit)'}")
+
+
+@app.command()
+def diagnose(
+    run_or_checkpoint: Annotated[Path, typer.Argument(help="A run folder or a checkpoint file.")],
+    prefs: Annotated[int, typer.Option(help="Equally spaced preferences.")] = 101,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the result as JSON.")] = False,
+    device: Annotated[str | None, typer.Option(help="cpu, cuda or auto (default: the run's).")] = None,
+) -> None:
+    """Measure a trained agent against the exact Q* (environments with known dynamics: Deep-Sea-Treasure)."""
+    from mope.diagnose import diagnose as run_diagnosis
+    from mope.experiments import load_agent, resolve_checkpoint
+
+    try:
+        if prefs < 1:
+            raise ConfigError(f"--prefs {prefs} is out of range: must be >= 1")
+        ckpt = resolve_checkpoint(run_or_checkpoint)
+        agent = load_agent(ckpt, device)
+        res = run_diagnosis(agent, agent.env, agent.config.gamma, prefs)
+    except MopeError as exc:
+        _fail(str(exc))
+        return
+    if as_json:
+        typer.echo(json.dumps({"checkpoint": str(ckpt), **res}, indent=2))
+        return
+    typer.echo(f"checkpoint: {ckpt} (step {agent.global_step})")
+    for key, value in res.items():
+        typer.echo(f"{key:>20}: {value:.4f}")
 
 
 reproduce_app = typer.Typer(no_args_is_help=True, help="Reproduce the paper's experiments.")

@@ -37,6 +37,32 @@ Q_HEADS = ("conditioned", "convex")
 DEVICES = ("cpu", "cuda", "auto")
 
 
+#: Named sets of defaults: ``Config.from_dict({"preset": name, ...})``, ``mope train --preset name``.
+#: ``mope`` is the dataclass defaults (see docs/design.md, "The learner"); ``paper`` is the paper's literal settings
+#: as mope 0.1 ran them (the defaults before the learning study, double Q-learning and target clipping included);
+#: ``envelope`` is morl-baselines' Envelope example (examples/envelope_minecart.py) with gamma 0.99 and epsilon
+#: decayed over 10k steps, for the EQL variant.
+PRESETS: dict[str, dict[str, Any]] = {
+    "mope": {},
+    "paper": {"q_head": "conditioned", "obs_encoding": "scale", "hidden_sizes": [64, 128, 128, 64],
+              "learning_rate": 1e-3, "learning_rate_end": None, "batch_size": 32, "target_tau": None,
+              "target_update_freq": 100, "max_grad_norm": 10.0, "n_omega": 64, "relabel_broad": 0.0,
+              "envelope_prefs": "relabel"},
+    "envelope": {"q_head": "conditioned", "obs_encoding": "scale", "hidden_sizes": [256, 256, 256, 256],
+                 "learning_rate": 3e-4, "learning_rate_end": None, "batch_size": 64, "n_omega": 4,
+                 "target_tau": None, "target_update_freq": 1000, "max_grad_norm": 0.1, "lb_homotopy_steps": 10_000,
+                 "relabel_broad": 0.0, "envelope_prefs": "relabel", "clip_targets": False, "learning_starts": 100,
+                 "per_alpha": 0.6},
+}
+
+
+def check_preset(name: str) -> str:
+    """Return ``name`` if it names a preset, else raise a :class:`ConfigError` with the closest name."""
+    if name not in PRESETS:
+        raise ConfigError(f"unknown preset '{name}'{suggest(name, PRESETS)}; choose one of {', '.join(PRESETS)}")
+    return name
+
+
 def _is_int(x: Any) -> bool:
     return isinstance(x, int) and not isinstance(x, bool)
 
@@ -138,22 +164,22 @@ class Config:
     #: How observations enter the networks: "scale" (a bounded Box to [0, 1]: the paper's (x, y) input),
     #: "onehot" (each coordinate of an integer Box one-hot encoded), or "auto" (onehot for a small integer Box,
     #: else scale).
-    obs_encoding: str = "scale"
+    obs_encoding: str = "auto"
 
     # --- EQL core (paper eq. 4; Yang et al. 2019) ------------------------------------------------------------
     gamma: float = 0.99
     #: Q-network head: "conditioned" (the paper: omega is an input, one vector per action and objective) or
     #: "convex" (C return vectors per action; Q(s, a, w) is the one w prefers: mope.networks.ConvexQNetwork).
-    q_head: str = "conditioned"
+    q_head: str = "convex"
     #: C, return vectors per action of the convex head.
     n_components: int = 12
     #: Weight of the convex head's component loss (each target also trains its nearest component).
     component_loss_weight: float = 1.0
-    hidden_sizes: tuple[int, ...] = (64, 128, 128, 64)
-    learning_rate: float = 1e-3
+    hidden_sizes: tuple[int, ...] = (256, 256, 256)
+    learning_rate: float = 3e-4
     #: Cosine decay of the learning rate to this value over total_steps; None keeps it constant.
-    learning_rate_end: float | None = None
-    batch_size: int = 32
+    learning_rate_end: float | None = 3e-5
+    batch_size: int = 128
     buffer_size: int = 20_000
     learning_starts: int = 200
     #: Gradient updates per environment step.
@@ -161,12 +187,12 @@ class Config:
     #: Hard target-network copy every this many environment steps (Yang et al. use 100).
     target_update_freq: int = 100
     #: Polyak averaging of the target network at every step with this weight; None: the hard copy above.
-    target_tau: float | None = None
+    target_tau: float | None = 0.005
     #: Weight of the auxiliary loss: L = L^A + lb_weight * L^B. The paper uses 1.
     lb_weight: float = 1.0
     #: Homotopy of Yang et al.: the weight of L^B rises linearly from 0 to lb_weight over this many steps (0: off).
     lb_homotopy_steps: int = 0
-    max_grad_norm: float | None = 10.0
+    max_grad_norm: float | None = 1.0
     #: Pick (a*, w'*) of the envelope target with the online network, read the value from the target network
     #: (double Q-learning). Not in the paper; see docs/design.md for why it is on by default.
     double_q: bool = True
@@ -178,7 +204,7 @@ class Config:
     epsilon_decay_steps: int = 10_000
     #: Preferences per sampled transition (N_omega). EQL draws them uniformly from the simplex, shared by
     #: the batch (Yang et al.'s ``weight_num``); EE draws them within ``sigma_omega`` of the transition's own.
-    n_omega: int = 64
+    n_omega: int = 32
 
     # --- prioritized replay (Schaul et al. 2016) ------------------------------------------------------------
     per: bool = True
@@ -191,11 +217,11 @@ class Config:
     sigma_omega: float = 0.04
     #: Share of a transition's N_omega relabeled preferences drawn uniformly from the whole simplex instead of
     #: within sigma_omega (EE only; 0 is the paper's similar-preference relabeling).
-    relabel_broad: float = 0.0
+    relabel_broad: float = 0.5
     #: Preference set the envelope max runs over: the transition's own relabeled set ("relabel"),
     #: the acting preferences of the whole batch ("batch"), or both; "own" switches the envelope off (each row maxes
     #: over actions at its own preference only: an ablation, like morl-baselines' ``envelope=False``).
-    envelope_prefs: str = "relabel"
+    envelope_prefs: str = "own"
     #: Weight alpha of the mutual-information term in the priority (eq. 7).
     mi_alpha: float = 0.1
     disc_hidden: tuple[int, ...] = (64, 64)
@@ -309,12 +335,16 @@ class Config:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Config:
-        """Build from a flat dict (a saved config or overrides). ``algo`` sets the exploration switches.
+        """Build from a flat dict (a saved config or overrides). ``algo`` sets the exploration switches;
+        ``preset`` (see :data:`PRESETS`) sets defaults that the other keys override.
 
         ``extra`` (a field of older versions, always empty) is accepted and dropped.
         """
         data = dict(data)
         data.pop("extra", None)
+        preset = data.pop("preset", None)
+        if preset is not None:
+            data = {**PRESETS[check_preset(preset)], **data}
         algo = data.pop("algo", None)
         names = cls.field_names()
         for key in data:
@@ -343,26 +373,31 @@ class Config:
     @classmethod
     def load(cls, path: str | Path) -> Config:
         """Read a config from JSON or YAML."""
-        path = Path(path)
-        if not path.is_file():
-            raise ConfigError(f"config file '{path}' does not exist")
-        try:
-            text = path.read_text()
-        except (OSError, UnicodeDecodeError) as exc:
-            reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
-            raise ConfigError(f"config file '{path}' could not be read: {reason}") from None
-        try:
-            if path.suffix in (".yaml", ".yml"):
-                import yaml
+        return cls.from_dict(read_config_file(path))
 
-                data = yaml.safe_load(text) or {}
-            else:
-                data = json.loads(text)
-        except Exception as exc:  # noqa: BLE001 - any parse failure is the user's file
-            raise ConfigError(f"config file '{path}' could not be parsed: {_parse_problem(exc)}") from None
-        if not isinstance(data, dict):
-            raise ConfigError(f"config file '{path}' must hold a mapping of settings")
-        return cls.from_dict(data)
+
+def read_config_file(path: str | Path) -> dict[str, Any]:
+    """The mapping of settings in a JSON or YAML config file, as written (unresolved)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"config file '{path}' does not exist")
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        raise ConfigError(f"config file '{path}' could not be read: {reason}") from None
+    try:
+        if path.suffix in (".yaml", ".yml"):
+            import yaml
+
+            data = yaml.safe_load(text) or {}
+        else:
+            data = json.loads(text)
+    except Exception as exc:  # noqa: BLE001 - any parse failure is the user's file
+        raise ConfigError(f"config file '{path}' could not be parsed: {_parse_problem(exc)}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"config file '{path}' must hold a mapping of settings")
+    return data
 
 
 def check_algo(algo: str) -> str:

@@ -133,6 +133,39 @@ def _close_loops(batch: Any, running: np.ndarray, visited: np.ndarray, returns: 
     return running[~again]
 
 
+#: Ground-truth columns of an evaluation (NaN where the environment's dynamics are not known).
+TRUTH_KEYS = ("path_error", "state_error", "overestimation")
+
+
+class GroundTruthCheck:
+    """Exact Q* of a known environment at 101 equally spaced preferences, and the diagnostic against it."""
+
+    def __init__(self, model: Any, truth: Any) -> None:
+        self.model, self.truth = model, truth
+
+    @classmethod
+    def for_env(cls, env: gym.Env, gamma: float, n_prefs: int = 101) -> GroundTruthCheck | None:
+        from mope.diagnose import tabular_model, value_iteration
+        from mope.errors import EnvironmentError_
+
+        try:
+            model = tabular_model(env)
+        except EnvironmentError_:
+            return None
+        m = model.reward.shape[2]
+        return cls(model, value_iteration(model, equally_spaced(m, n_prefs), gamma))
+
+    def measure(self, agent: Any) -> dict[str, float]:
+        """``path_error``, ``state_error`` and ``overestimation`` (mean, at the start state) of ``agent``."""
+        from mope.diagnose import agent_q, diagnose_q
+
+        if not hasattr(agent, "q_values"):
+            return dict.fromkeys(TRUTH_KEYS, float("nan"))
+        d = diagnose_q(agent_q(agent, self.model, self.truth.prefs), self.model, self.truth)
+        return {"path_error": d["path_error"], "state_error": d["state_error"],
+                "overestimation": d["overestimation_mean"]}
+
+
 class Evaluator:
     """The evaluation protocol: a fixed set of uniform preferences for CR, equally spaced ones for EUM.
 
@@ -160,6 +193,9 @@ class Evaluator:
         self.close_loops = True
         self.ref_point = (np.asarray(ref_point, dtype=np.float64) if ref_point is not None
                           else default_ref_point(env, env_id, gamma, self.max_steps))
+        #: Exact values (:mod:`mope.diagnose`) where the environment's dynamics are known, else None; each
+        #: evaluation then also measures the greedy policy against them.
+        self.ground_truth = GroundTruthCheck.for_env(env, gamma)
 
     @classmethod
     def from_config(cls, env: gym.Env, config: Any, n_prefs: int | None = None, seed: int | None = None
@@ -196,4 +232,6 @@ class Evaluator:
             result["eum_optimal"] = float(np.mean(metrics.optimal_utility(eq_prefs, self.front)))
             result["eum_gap"] = result["eum_optimal"] - result["eum"]
         result["timeout_share"] = float(np.mean(~uni.terminated))
+        result.update(self.ground_truth.measure(agent) if self.ground_truth is not None else
+                      dict.fromkeys(TRUTH_KEYS, float("nan")))
         return result, uni

@@ -4,7 +4,8 @@ A run folder written by :func:`train_run` (and ``mope train``) holds::
 
     config.json          the resolved Config (every field, plus the derived algo)
     metrics.csv          one row per evaluation: step, wall_s, cr, precision, recall, hv, eum, eum_optimal,
-                         eum_gap, optimal_share, cardinality, timeout_share, loss, epsilon
+                         eum_gap, optimal_share, cardinality, timeout_share, path_error, state_error,
+                         overestimation (against the exact Q* where the dynamics are known, else NaN), loss, epsilon
     train_stats.csv      every log_every steps: the mean of each update statistic over those steps (loss,
                          loss_a, loss_b, td_abs, q_mean, q_max, mi_bonus, disc_loss) and epsilon
     solutions.csv        the final evaluation: preference, discounted and undiscounted return per preference
@@ -39,13 +40,13 @@ from mope.checkpoint import mope_version
 from mope.config import Config
 from mope.envs import make_env
 from mope.errors import CheckpointError, MopeError
-from mope.evaluation import Evaluator, Solutions, solutions
+from mope.evaluation import TRUTH_KEYS, Evaluator, Solutions, solutions
 from mope.locks import FolderLock
 from mope.metrics import EVALUATE_KEYS
 from mope.preferences import validate_preference
 from mope.runner import Callback, EvalCallback, IntervalStats, ProgressBar, StopWhen, train
 
-METRIC_COLUMNS = ["step", "wall_s", *EVALUATE_KEYS, "timeout_share", "loss", "epsilon"]
+METRIC_COLUMNS = ["step", "wall_s", *EVALUATE_KEYS, "timeout_share", *TRUTH_KEYS, "loss", "epsilon"]
 #: Interval averages of the update statistics (``IntervalStats``), every ``log_every`` steps.
 TRAIN_STATS = "train_stats.csv"
 STATS_COLUMNS = ["step", "updates", "epsilon", "loss", "loss_a", "loss_b", "td_abs", "q_mean", "q_max", "mi_bonus",

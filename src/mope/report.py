@@ -30,14 +30,14 @@ import numpy as np
 
 from mope.errors import MopeError
 
-DEFAULT_METRICS = ("cr", "igd", "hv", "eum", "optimal_share", "timeout_share")
+DEFAULT_METRICS = ("cr", "igd", "hv", "eum", "optimal_share", "timeout_share", "path_error")
 METRIC_LABELS = {"cr": "CR", "hv": "HV", "eum": "EUM", "optimal_share": "optimal share",
                  "timeout_share": "time-outs", "eum_gap": "EUM gap", "precision": "precision", "recall": "recall",
                  "cardinality": "cardinality", "eum_optimal": "EUM optimum", "igd": "IGD"}
 #: Number formats per metric in report.md (report.json keeps full precision).
 FORMATS = {"igd": ".2f", "hv": ".1f", "eum": ".2f", "eum_gap": ".2f", "eum_optimal": ".2f", "cardinality": ".1f"}
 #: Config fields that never split groups: the seed, and settings that do not change a run's results.
-IGNORED_FIELDS = ("seed", "device", "torch_threads", "checkpoint_every")
+IGNORED_FIELDS = ("seed", "device", "torch_threads", "checkpoint_every", "log_every")
 #: Fields named first in group labels.
 LEAD_FIELDS = ("env_id", "algo")
 

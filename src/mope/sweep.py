@@ -133,7 +133,7 @@ def parse_spec(data: Any, name: str = "sweep") -> SweepSpec:
             raise SweepError(f"unknown spec key '{key}'{suggest(str(key), SPEC_KEYS)}; "
                              f"a spec has {', '.join(SPEC_KEYS)}")
     fields = Config.field_names()
-    axes_names = ["algo", *fields]
+    axes_names = ["algo", "preset", *fields]
     base = data.get("base") or {}
     grid_in = data.get("grid") or {}
     for what, mapping in (("base", base), ("grid", grid_in)):
@@ -202,7 +202,7 @@ def apply_overrides(spec: SweepSpec, overrides: dict[str, Any] | None = None, se
         seeds: ``--seeds N``: run seeds ``0..N-1`` instead of the spec's.
     """
     base, grid = dict(spec.base), {k: list(v) for k, v in spec.grid.items()}
-    names = ["algo", *Config.field_names()]
+    names = ["algo", "preset", *Config.field_names()]
     new_seeds = list(spec.seeds)
     for key, value in (overrides or {}).items():
         if key == "seed":

@@ -1,0 +1,110 @@
+"""The ground-truth diagnostic (mope.diagnose): exact values on hand-made models, DST against its known front,
+the seabed variant, and the diagnostic's numbers for hand-made agents."""
+
+from __future__ import annotations
+
+import mo_gymnasium as mo_gym
+import numpy as np
+import pytest
+
+import mope  # noqa: F401 - registers mope's environments
+from mope.diagnose import TabularModel, diagnose, diagnose_q, tabular_model, value_iteration
+from mope.errors import EnvironmentError_
+
+STAY, SMALL_T, GO = 0, 1, 2
+PREFS = np.array([[0.0, 1.0], [0.5, 0.5], [1.0, 0.0]])
+
+
+def chain() -> TabularModel:
+    """State 0 (start) and 1. Actions: stay (0, -1); take the small treasure (1, -1), terminal; go: from 0 to 1
+    with (0, -1), from 1 take the big treasure (10, -1), terminal."""
+    next_state = np.array([[0, 0, 1], [1, 1, 1]])
+    reward = np.array([[[0, -1], [1, -1], [0, -1]], [[0, -1], [1, -1], [10, -1]]], dtype=float)
+    terminal = np.array([[False, True, False], [False, True, True]])
+    return TabularModel(np.array([[0], [1]]), next_state, reward, terminal, 0, np.array([True, True]))
+
+
+def test_value_iteration_hand_values() -> None:
+    truth = value_iteration(chain(), PREFS, gamma=0.5)
+    w1, w2 = PREFS[:, 0], PREFS[:, 1]
+    v1 = 10 * w1 - w2  # at state 1 the big treasure is best for every preference here
+    np.testing.assert_allclose(truth.v[:, 1], v1)
+    np.testing.assert_allclose(truth.q[:, 0, SMALL_T], w1 - w2)
+    np.testing.assert_allclose(truth.q[:, 0, GO], -w2 + 0.5 * v1)  # = 5 w1 - 1.5 w2
+    np.testing.assert_allclose(truth.v[:, 0], [-1.0, 1.75, 5.0])  # small for (0, 1); go for the others
+    # vector returns of acting optimally after each action
+    np.testing.assert_allclose(truth.q_vec[1, 0, GO], [5.0, -1.5])
+    np.testing.assert_allclose(truth.q_vec[0, 0, SMALL_T], [1.0, -1.0])
+    np.testing.assert_allclose(truth.q_vec[0, 0, STAY], [0.5, -1.5])  # stay once, then the small treasure
+
+
+class FixedQ:
+    """An agent whose vector Q-values are a table: always 'go' (and the big treasure), every other action -100."""
+
+    def q_values(self, obs: np.ndarray, prefs: np.ndarray) -> np.ndarray:
+        q = np.full((len(obs), 3, 2), -100.0)
+        at0 = obs[:, 0] == 0
+        q[at0, GO] = [5.0, -1.5]
+        q[~at0, GO] = [10.0, -1.0]
+        return q
+
+
+def test_diagnostic_hand_values() -> None:
+    model = chain()
+    truth = value_iteration(model, PREFS, gamma=0.5)
+    from mope.diagnose import agent_q
+
+    d = diagnose_q(agent_q(FixedQ(), model, PREFS), model, truth)
+    # on-path pairs: w=(0,1) -> {0} (the small treasure ends it), wrong; the others -> {0, 1}, right
+    assert d["path_error"] == pytest.approx(1 / 5)
+    assert d["state_error"] == pytest.approx(1 / 6)  # every reachable state: (w=(0,1), s=0) is the one error
+    assert d["path_failed_share"] == pytest.approx(1 / 3) and d["first_error_step"] == 0.0
+    # max_a w^T Q(s0) - V*(s0): (0,1): -1.5 - (-1) = -0.5; (.5,.5): 1.75 - 1.75; (1,0): 5 - 5
+    assert d["overestimation_mean"] == pytest.approx(-0.5 / 3) and d["overestimation_max"] == pytest.approx(0.0)
+
+
+class Exact:
+    def __init__(self, truth: object, model: TabularModel) -> None:
+        self.truth, self.model = truth, model
+
+    def q_values(self, obs: np.ndarray, prefs: np.ndarray) -> np.ndarray:
+        s = self._state(obs)
+        i = np.array([np.flatnonzero(np.all(self.truth.prefs == p, axis=1))[0] for p in prefs])
+        return self.truth.q_vec[i, s]
+
+    def _state(self, obs: np.ndarray) -> np.ndarray:
+        flat = self.model.obs.reshape(len(self.model.obs), -1)
+        return np.array([np.flatnonzero(np.all(flat == o, axis=1))[0] for o in obs.reshape(len(obs), -1)])
+
+
+@pytest.mark.parametrize("env_id", ["deep-sea-treasure-v0", "deep-sea-treasure-concave-v0",
+                                    "deep-sea-treasure-mirrored-v0", "mope/deep-sea-treasure-seabed-v0"])
+def test_dst_values_match_the_known_front_and_the_exact_agent_scores_zero(env_id: str) -> None:
+    env = mo_gym.make(env_id)
+    model = tabular_model(env)
+    w = np.stack([np.linspace(0, 1, 21), 1 - np.linspace(0, 1, 21)], axis=1)
+    truth = value_iteration(model, w, gamma=0.99)
+    front = np.asarray(env.unwrapped.pareto_front(gamma=0.99))
+    np.testing.assert_allclose(truth.v[:, model.start], (w @ front.T).max(axis=1), atol=1e-9)
+    d = diagnose(Exact(truth, model), env, gamma=0.99, prefs=w)
+    assert d["path_error"] == 0 and d["state_error"] == 0 and abs(d["overestimation_max"]) < 1e-9
+
+
+def test_seabed_variant_ends_on_the_rock() -> None:
+    env = mo_gym.make("mope/deep-sea-treasure-seabed-v0")
+    model = tabular_model(env)
+    cols = env.unwrapped.sea_map.shape[1]
+    s = 1 * cols + 1  # (1, 1): the rock (2, 0) is not below it, the 8.2 treasure (2, 1) is
+    down, left = 1, 2
+    assert model.terminal[s, down] and model.reward[s, down].tolist() == [8.2, -1.0]
+    s = 5 * cols + 6  # (5, 6): left of it (5, 5) is rock
+    assert model.terminal[s, left] and model.reward[s, left].tolist() == [-10.0, -1.0]
+    obs, _ = env.reset(seed=0)
+    env.unwrapped.current_state = np.array([5, 6])
+    _, r, term, _, _ = env.step(left)
+    assert term and r.tolist() == [-10.0, -1.0]
+
+
+def test_unknown_dynamics_are_refused() -> None:
+    with pytest.raises(EnvironmentError_, match="no ground truth for environment 'four-room-v0'"):
+        tabular_model(mo_gym.make("four-room-v0"))

@@ -39,7 +39,7 @@ FORMATS = {"igd": ".2f", "hv": ".1f", "eum": ".2f", "eum_gap": ".2f", "eum_optim
 #: Config fields that never split groups: the seed, and settings that do not change a run's results.
 IGNORED_FIELDS = ("seed", "device", "torch_threads", "checkpoint_every", "log_every")
 #: Fields named first in group labels.
-LEAD_FIELDS = ("env_id", "algo")
+LEAD_FIELDS = ("env_id", "algo", "arm")
 
 
 class ReportError(MopeError):
@@ -182,15 +182,30 @@ def _varying(runs: Sequence[Run], ignore: Sequence[str]) -> list[str]:
     return [k for k in keys if k not in ignore and len({_canon(r.config.get(k)) for r in runs}) > 1]
 
 
-def _swept_fields(runs_dir: Path) -> list[str] | None:
+def _sweep_doc(runs_dir: Path) -> dict[str, Any] | None:
     path = runs_dir / "sweep.json"
     if not path.is_file():
         return None
     try:
-        doc = json.loads(path.read_text())
+        return json.loads(path.read_text())
     except json.JSONDecodeError:
         return None
-    return [k for k in doc.get("swept", []) if k != "seed"]
+
+
+def _swept_fields(runs_dir: Path) -> list[str] | None:
+    doc = _sweep_doc(runs_dir)
+    return None if doc is None else [k for k in doc.get("swept", []) if k != "seed"]
+
+
+def _label_arms(runs: Sequence[Run], runs_dir: Path) -> list[str]:
+    """Give each run of a sweep with arms its arm (as a pseudo-field ``arm``); return the fields the arms set."""
+    doc = _sweep_doc(runs_dir) or {}
+    arms = {t["name"]: t.get("params", {}).get("arm") for t in doc.get("trials", []) if "name" in t}
+    for r in runs:
+        arm = arms.get(r.path.name)
+        if arm is not None:
+            r.config = {**r.config, "arm": arm}
+    return list(doc.get("arm_fields", []))
 
 
 def _label(key: dict[str, Any]) -> str:
@@ -210,7 +225,7 @@ def _short(v: Any) -> str:
 
 
 def group_runs(runs: Sequence[Run], swept: Sequence[str] | None = None,
-               split_mismatched: bool = False) -> tuple[list[Group], list[str]]:
+               split_mismatched: bool = False, arm_fields: Sequence[str] = ()) -> tuple[list[Group], list[str]]:
     """Group runs by config minus seed.
 
     Args:
@@ -218,6 +233,7 @@ def group_runs(runs: Sequence[Run], swept: Sequence[str] | None = None,
         swept: The fields a sweep varied (its grid axes); ``None`` groups by every field that varies.
         split_mismatched: When runs of one group differ in fields beyond ``swept``, split by them too (with a
             note) instead of raising.
+        arm_fields: The fields a sweep's arms set; the pseudo-field ``arm`` stands for them.
 
     Returns:
         The groups, in order of first appearance, and notes.
@@ -235,7 +251,7 @@ def group_runs(runs: Sequence[Run], swept: Sequence[str] | None = None,
                          f"{', '.join(extra)}")
     else:
         by = [k for k in swept if k in varying or k in LEAD_FIELDS]
-        derived = {"algo": ("experience_exploration", "preference_exploration")}
+        derived = {"algo": ("experience_exploration", "preference_exploration"), "arm": tuple(arm_fields)}
         covered = set(by) | {d for k in by for d in derived.get(k, ())}
         extra = [k for k in varying if k not in covered]
         if extra:
@@ -430,7 +446,8 @@ def report(runs_dir: str | Path, out_dir: str | Path | None = None, metrics: Seq
         raise ReportError(f"n_boot={n_boot} is out of range: must be >= 1")
     root = Path(runs_dir)
     runs, notes = find_runs(root)
-    groups, group_notes = group_runs(runs, _swept_fields(root), split_mismatched)
+    arm_fields = _label_arms(runs, root)
+    groups, group_notes = group_runs(runs, _swept_fields(root), split_mismatched, arm_fields)
     notes += group_notes
     for g in groups:
         for m in metrics:

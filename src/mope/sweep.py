@@ -39,7 +39,7 @@ from mope.errors import ConfigError, MopeError, suggest
 from mope.jobs import Job, JobError, check_backend, run_jobs
 from mope.locks import FolderLock
 
-SPEC_KEYS = ("name", "base", "grid", "seeds", "seed")
+SPEC_KEYS = ("name", "base", "grid", "arms", "seeds", "seed")
 #: Fields that do not change a run's results; a finished trial whose saved config differs only in these is reused.
 NON_RESULT_FIELDS = ("device", "torch_threads")
 
@@ -56,6 +56,7 @@ class SweepSpec:
         name: Name of the sweep (the default output folder is ``runs/<name>``).
         base: Fixed Config fields (``algo`` allowed).
         grid: Axis name -> list of values; axes are ``algo`` and Config fields, never ``seed``.
+        arms: Arm name -> settings: named one-off changes (an ablation's arms), each crossed with the grid.
         seeds: Seeds, run for every grid point.
     """
 
@@ -63,10 +64,11 @@ class SweepSpec:
     base: dict[str, Any] = field(default_factory=dict)
     grid: dict[str, list[Any]] = field(default_factory=dict)
     seeds: list[int] = field(default_factory=lambda: [0])
+    arms: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain dict in the spec file's layout."""
-        return {"name": self.name, "base": self.base, "grid": self.grid, "seeds": self.seeds}
+        return {"name": self.name, "base": self.base, "grid": self.grid, "arms": self.arms, "seeds": self.seeds}
 
 
 @dataclass
@@ -172,7 +174,24 @@ def parse_spec(data: Any, name: str = "sweep") -> SweepSpec:
     spec_name = data.get("name", name)
     if not isinstance(spec_name, str) or not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]*", spec_name):
         raise SweepError(f"name={spec_name!r} must be a folder-safe name (letters, digits, '.', '_', '-')")
-    return SweepSpec(spec_name, dict(base), grid, seeds)
+    return SweepSpec(spec_name, dict(base), grid, seeds, _parse_arms(data.get("arms") or {}, axes_names, grid))
+
+
+def _parse_arms(arms: Any, axes_names: list[str], grid: dict[str, list[Any]]) -> dict[str, dict[str, Any]]:
+    """Validate ``arms``: a mapping of folder-safe names to mappings of config keys not on the grid."""
+    if not isinstance(arms, dict):
+        raise SweepError(f"'arms' must map arm names to settings; got {type(arms).__name__}")
+    for arm, settings in arms.items():
+        if not isinstance(arm, str) or not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._+-]*", arm):
+            raise SweepError(f"arm name {arm!r} must be folder-safe (letters, digits, '.', '_', '+', '-')")
+        if not isinstance(settings, dict):
+            raise SweepError(f"arms.{arm} must be a mapping of config fields (use {{}} for none)")
+        for key in settings:
+            if key not in axes_names or key == "seed":
+                raise SweepError(f"unknown config key '{key}' in arms.{arm}{suggest(str(key), axes_names)}")
+            if key in grid:
+                raise SweepError(f"'{key}' is both a grid axis and set by arms.{arm}; keep one")
+    return {str(a): dict(v) for a, v in arms.items()}
 
 
 def load_spec(path: str | Path) -> SweepSpec:
@@ -232,7 +251,8 @@ def _fmt_value(v: Any) -> str:
 def trial_name(config: Config, params: dict[str, Any]) -> str:
     """Folder name ``<env>-<algo>-<field>=<value>-...-s<seed>`` (swept fields other than env and algo, in order)."""
     parts = [config.env_id, config.algo]
-    parts += [f"{k}={_fmt_value(v)}" for k, v in params.items() if k not in ("env_id", "algo", "seed")]
+    parts += [str(params["arm"])] if "arm" in params else []
+    parts += [f"{k}={_fmt_value(v)}" for k, v in params.items() if k not in ("env_id", "algo", "seed", "arm")]
     parts.append(f"s{config.seed}")
     return re.sub(r"[^A-Za-z0-9._=,+-]", "_", "-".join(parts))
 
@@ -245,21 +265,21 @@ def expand(spec: SweepSpec) -> list[Trial]:
     """
     axes = list(spec.grid)
     points = [dict(zip(axes, combo, strict=True)) for combo in itertools.product(*(spec.grid[a] for a in axes))]
+    arms: dict[str | None, dict[str, Any]] = dict(spec.arms) or {None: {}}
     trials: list[Trial] = []
     seen: dict[str, dict[str, Any]] = {}
-    for seed in spec.seeds:
-        for point in points:
-            params = {**point, "seed": seed}
-            try:
-                config = Config.from_dict({**spec.base, **point, "seed": seed})
-            except ConfigError as exc:
-                where = ", ".join(f"{k}={_fmt_value(v)}" for k, v in params.items())
-                raise SweepError(f"trial ({where}): {exc}") from None
-            name = trial_name(config, params)
-            if name in seen:
-                raise SweepError(f"trials {seen[name]} and {params} would share the folder '{name}'")
-            seen[name] = params
-            trials.append(Trial(name, params, config))
+    for seed, point, arm in itertools.product(spec.seeds, points, arms):
+        params = {**point, **({"arm": arm} if arm is not None else {}), "seed": seed}
+        try:
+            config = Config.from_dict({**spec.base, **arms[arm], **point, "seed": seed})
+        except ConfigError as exc:
+            where = ", ".join(f"{k}={_fmt_value(v)}" for k, v in params.items())
+            raise SweepError(f"trial ({where}): {exc}") from None
+        name = trial_name(config, params)
+        if name in seen:
+            raise SweepError(f"trials {seen[name]} and {params} would share the folder '{name}'")
+        seen[name] = params
+        trials.append(Trial(name, params, config))
     return trials
 
 
@@ -363,10 +383,22 @@ def _write_sweep_json(out: Path, spec: SweepSpec, trials: Sequence[Trial], recor
         rec = records.get(t.name, {})
         rows.append({"name": t.name, "params": t.params, "status": rec.get("status", "pending"),
                      "action": rec.get("action"), "wall_s": rec.get("wall_s"), "error": rec.get("error")})
-    doc = {"spec": spec.to_dict(), "swept": [*spec.grid, "seed"], **state, "trials": rows}
+    arm_fields = _arm_fields(spec, trials)
+    doc = {"spec": spec.to_dict(), "swept": [*spec.grid, *(["arm"] if spec.arms else []), "seed"],
+           "arm_fields": arm_fields, **state, "trials": rows}
     tmp = out / "sweep.json.tmp"
     tmp.write_text(json.dumps(doc, indent=2, default=_json_default) + "\n")
     tmp.replace(out / "sweep.json")
+
+
+def _arm_fields(spec: SweepSpec, trials: Sequence[Trial]) -> list[str]:
+    """The config fields the arms change (a preset resolves to many): those that differ across the trials beyond the
+    seed and the grid's axes."""
+    if not spec.arms:
+        return []
+    configs = [t.config.to_dict() for t in trials]
+    return [k for k in configs[0] if k not in ("seed", "algo", *spec.grid)
+            and len({json.dumps(c[k], sort_keys=True) for c in configs}) > 1]
 
 
 def _json_default(x: Any) -> Any:

@@ -233,7 +233,7 @@ def apply_overrides(spec: SweepSpec, overrides: dict[str, Any] | None = None, se
         base[key] = value
     if seeds is not None:
         new_seeds = _seed_list(seeds, "--seeds")
-    return SweepSpec(spec.name, base, grid, new_seeds)
+    return SweepSpec(spec.name, base, grid, new_seeds, dict(spec.arms))
 
 
 def _fmt_value(v: Any) -> str:

@@ -150,3 +150,19 @@ def test_unfinished_runs_are_left_out_and_errors_are_clear(tmp_path: Path) -> No
     write_run(tmp_path / "dupe", "eql", 0, FINAL["eql"][2])
     with pytest.raises(ReportError, match="holds seed 0 twice"):
         report(tmp_path, plots=False)
+
+
+def test_a_sweep_with_arms_is_grouped_by_arm(tmp_path: Path) -> None:
+    trials = []
+    for arm, overrides, finals in (("default", {}, FINAL["mope"][:2]),
+                                   ("paper", {"hidden_sizes": [64, 128, 128, 64], "learning_rate": 1e-3},
+                                    FINAL["eql"][:2])):
+        for seed, final in enumerate(finals):
+            name = f"deep-sea-treasure-v0-mope-{arm}-s{seed}"
+            write_run(tmp_path / name, "mope", seed, final, **overrides)
+            trials.append({"name": name, "params": {"arm": arm, "seed": seed}})
+    (tmp_path / "sweep.json").write_text(json.dumps({"swept": ["arm", "seed"], "trials": trials,
+                                                     "arm_fields": ["hidden_sizes", "learning_rate"]}))
+    res = report(tmp_path, plots=False)
+    assert [g.label for g in res.groups] == ["default", "paper"]
+    assert res.groups[1].stats["cr"].mean == pytest.approx(0.3)

@@ -212,3 +212,24 @@ def test_a_ray_node_without_the_sweep_folder_sends_the_trial_back(tmp_path: Path
     assert not (out / "t-s0" / "checkpoints" / "resume.pt").exists()
     with pytest.raises(JobError, match="holds files outside its folder"):
         unpack_job({"name": "other", "archive": archive}, out)
+
+
+def test_arms_are_named_one_off_changes_crossed_with_the_grid() -> None:
+    spec = parse_spec({"name": "study", "base": {"total_steps": 100}, "grid": {"algo": ["eql", "mope"]},
+                       "arms": {"default": {}, "paper": {"preset": "paper"}, "lr": {"learning_rate": 1e-4}},
+                       "seeds": 2})
+    trials = expand(spec)
+    assert len(trials) == 2 * 2 * 3
+    assert trials[0].name == "deep-sea-treasure-v0-eql-default-s0"
+    by_name = {t.name: t for t in trials}
+    paper = by_name["deep-sea-treasure-v0-mope-paper-s1"]
+    assert paper.params == {"algo": "mope", "arm": "paper", "seed": 1}
+    assert paper.config.hidden_sizes == (64, 128, 128, 64) and paper.config.total_steps == 100
+    assert by_name["deep-sea-treasure-v0-eql-lr-s0"].config.learning_rate == 1e-4
+    assert apply_overrides(spec, seeds=1).arms == spec.arms  # --seeds / --set keep the arms
+    with pytest.raises(SweepError, match="'algo' is both a grid axis and set by arms.x"):
+        parse_spec({"grid": {"algo": ["eql"]}, "arms": {"x": {"algo": "mope"}}})
+    with pytest.raises(SweepError, match="unknown config key 'lr' in arms.x"):
+        parse_spec({"arms": {"x": {"lr": 1}}})
+    with pytest.raises(SweepError, match="arm name 'a b' must be folder-safe"):
+        parse_spec({"arms": {"a b": {}}})

@@ -233,3 +233,32 @@ def test_arms_are_named_one_off_changes_crossed_with_the_grid() -> None:
         parse_spec({"arms": {"x": {"lr": 1}}})
     with pytest.raises(SweepError, match="arm name 'a b' must be folder-safe"):
         parse_spec({"arms": {"a b": {}}})
+
+
+@pytest.mark.slow
+def test_a_killed_sweep_stops_its_workers_and_resumes(tmp_path: Path) -> None:
+    import os
+    import subprocess
+    import sys
+    import time
+
+    spec = {**SPEC, "base": {**TINY, "total_steps": 4000, "eval_every": 0, "checkpoint_every": 200}, "seeds": 1,
+            "grid": {"algo": ["eql"]}}
+    (tmp_path / "spec.yaml").write_text(yaml.safe_dump(spec))
+    out = tmp_path / "sweep"
+    cmd = [sys.executable, "-m", "mope.cli", "sweep", str(tmp_path / "spec.yaml"), "--out", str(out), "--workers", "1",
+           "--no-progress"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    trial = out / "deep-sea-treasure-v0-eql-s0"
+    deadline = time.monotonic() + 300
+    while not (trial / "checkpoints" / "resume.pt").is_file() and time.monotonic() < deadline:
+        time.sleep(0.5)
+    worker = json.loads((trial / ".mope.lock").read_text())["pid"]
+    proc.terminate()  # SIGTERM to the sweep only, as `kill` would
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 130 and "run the same command again to resume" in err and "Traceback" not in err
+    with pytest.raises(ProcessLookupError):
+        os.kill(worker, 0)  # the worker is gone, not left training
+    assert not (trial / "summary.json").exists() and not (trial / ".mope.lock").exists()
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+    assert res.returncode == 0 and "resumed" in res.stdout, res.stderr

@@ -290,6 +290,9 @@ def reproduce_dst_cmd(
     except MopeError as exc:
         _fail(str(exc))
         return
+    except KeyboardInterrupt:
+        typer.echo("\ninterrupted; run the same command again to resume", err=True)
+        raise typer.Exit(130) from None
     typer.echo(res["table"])
     typer.echo(f"figures and table in {res['out']} (training wall time {res['train_wall_s']:.0f} s)")
 
@@ -321,6 +324,9 @@ def reproduce_confrontation_cmd(
     except MopeError as exc:
         _fail(str(exc))
         return
+    except KeyboardInterrupt:
+        typer.echo("\ninterrupted; run the same command again to resume", err=True)
+        raise typer.Exit(130) from None
     typer.echo(res["table"])
     typer.echo(f"figures and table in {res['out']} (training {res['train_wall_s']:.0f} s, "
                f"evaluation {res['eval_wall_s']:.0f} s)")
@@ -345,6 +351,9 @@ def sweep(
     except MopeError as exc:
         _fail(str(exc))
         return
+    except KeyboardInterrupt:
+        typer.echo("\ninterrupted; running trials saved their state: run the same command again to resume", err=True)
+        raise typer.Exit(130) from None
     if any(r.status == "failed" for r in results):
         raise typer.Exit(1)
 

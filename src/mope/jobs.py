@@ -211,9 +211,28 @@ def _local_backend(jobs: list[tuple[str, str, dict[str, Any], str]], workers: in
                                    "the unfinished jobs") from None
             on_running(min(workers, sum(f.running() for f in pending)))
     except BaseException:
-        pool.shutdown(wait=False, cancel_futures=True)
+        _stop_workers(pool)
         raise
     pool.shutdown(wait=True)
+
+
+def _stop_workers(pool: ProcessPoolExecutor, grace_s: float = 120.0) -> None:
+    """Cancel the queued jobs and interrupt the running ones with SIGINT, as Ctrl-C in a terminal would: each
+    saves its resumable state and exits. Wait up to ``grace_s`` for them, then kill what is left."""
+    import signal
+
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in processes:
+        with contextlib.suppress(ProcessLookupError, OSError, ValueError):
+            if proc.is_alive():
+                os.kill(proc.pid, signal.SIGINT)
+    deadline = time.monotonic() + grace_s
+    for proc in processes:
+        with contextlib.suppress(ValueError, OSError):
+            proc.join(max(0.0, deadline - time.monotonic()))
+            if proc.is_alive():
+                proc.kill()
 
 
 def _ray_backend(jobs: list[tuple[str, str, dict[str, Any], str]], out: Path, workers: int | None,
@@ -306,13 +325,35 @@ def run_jobs(jobs: list[Job], out: Path, backend: str = "local", workers: int | 
             on_done(rec)
 
     try:
-        if todo and backend == "local":
-            _local_backend(todo, min(workers or os.cpu_count() or 1, len(todo)), done, summary.set_running)
-        elif todo:
-            _ray_backend(todo, out, workers, address, done, summary.set_running)
+        with _sigterm_as_interrupt():
+            if todo and backend == "local":
+                _local_backend(todo, min(workers or os.cpu_count() or 1, len(todo)), done, summary.set_running)
+            elif todo:
+                _ray_backend(todo, out, workers, address, done, summary.set_running)
     finally:
         summary.close()
     return records
+
+
+@contextlib.contextmanager
+def _sigterm_as_interrupt() -> Any:
+    """In the main thread, turn SIGTERM into KeyboardInterrupt for the block, so a killed batch stops its workers
+    (they save their resumable state) instead of leaving them running."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt(f"stopped by signal {signum}")
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 __all__ = ["BACKENDS", "JOB_KINDS", "Job", "JobError", "check_backend", "run_job", "run_jobs", "unpack_job"]

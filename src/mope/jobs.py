@@ -84,6 +84,34 @@ def _ppo_job(payload: dict[str, Any], out: Path) -> dict[str, Any]:
 JOB_KINDS: dict[str, Callable[[dict[str, Any], Path], dict[str, Any]]] = {"train": _train_job, "ppo": _ppo_job}
 
 
+#: Fields that do not change a run's results; a finished run whose saved config differs only in these is reused.
+NON_RESULT_FIELDS = ("device", "torch_threads", "log_every")
+
+
+def check_job_folders(jobs: list[Job], out: Path) -> None:
+    """Refuse a batch whose training job's folder holds a run of another config (the batch changed since).
+
+    Raises:
+        JobError: naming the folder and the differing fields with both values.
+    """
+    from mope.config import Config
+
+    for job in jobs:
+        path = out / job.name / "config.json"
+        if job.kind != "train" or not path.is_file():
+            continue
+        try:
+            saved = json.loads(path.read_text())
+        except (OSError, json.JSONDecodeError):
+            continue  # an unreadable config belongs to a run that never got going; it is started afresh
+        wanted = Config.from_dict(job.payload).to_dict()
+        differ = [k for k in wanted if k not in NON_RESULT_FIELDS and saved.get(k) != wanted[k]]
+        if differ:
+            what = ", ".join(f"{k} ({saved.get(k)!r} there, {wanted[k]!r} now)" for k in differ[:4])
+            raise JobError(f"folder '{out / job.name}' holds a run of another config: {what}; "
+                           "use another --out or delete that folder")
+
+
 def job_done(job: Job, out: Path) -> bool:
     """True when the job's folder holds its finished result (``summary.json``)."""
     return (out / job.name / "summary.json").is_file()
@@ -305,6 +333,7 @@ def run_jobs(jobs: list[Job], out: Path, backend: str = "local", workers: int | 
     for job in jobs:
         if job.kind not in JOB_KINDS:
             raise JobError(f"job '{job.name}' has unknown kind '{job.kind}'")
+    check_job_folders(jobs, out)
     out.mkdir(parents=True, exist_ok=True)
     (out / BATCH_MARKER).write_text("a folder of mope jobs\n")
     records: dict[str, dict[str, Any]] = {}

@@ -36,12 +36,10 @@ from typing import Any
 
 from mope.config import Config
 from mope.errors import ConfigError, MopeError, suggest
-from mope.jobs import Job, JobError, check_backend, run_jobs
+from mope.jobs import Job, JobError, check_backend, check_job_folders, run_jobs
 from mope.locks import FolderLock
 
 SPEC_KEYS = ("name", "base", "grid", "arms", "seeds", "seed")
-#: Fields that do not change a run's results; a finished trial whose saved config differs only in these is reused.
-NON_RESULT_FIELDS = ("device", "torch_threads")
 
 
 class SweepError(MopeError):
@@ -291,30 +289,16 @@ def check_environments(trials: Iterable[Trial]) -> None:
         make_env(env_id).close()
 
 
-def _config_differences(saved: dict[str, Any], wanted: dict[str, Any]) -> list[str]:
-    return [k for k in wanted if k not in NON_RESULT_FIELDS and saved.get(k) != wanted[k]]
-
-
 def check_existing(trials: Iterable[Trial], out: Path) -> None:
     """Refuse to reuse a trial folder that holds a run of a different config (the spec changed since).
 
     Raises:
         SweepError: naming the folder and the differing fields with both values.
     """
-    for t in trials:
-        path = out / t.name / "config.json"
-        if not path.is_file():
-            continue
-        try:
-            saved = json.loads(path.read_text())
-        except (OSError, json.JSONDecodeError):
-            continue  # an unreadable config belongs to a run that never got going; it is started afresh
-        wanted = t.config.to_dict()
-        differ = _config_differences(saved, wanted)
-        if differ:
-            what = ", ".join(f"{k} ({saved.get(k)!r} there, {wanted[k]!r} now)" for k in differ[:4])
-            raise SweepError(f"trial folder '{out / t.name}' holds a run of another config: {what}; "
-                             "use another --out or delete that folder")
+    try:
+        check_job_folders([Job(t.name, "train", t.config.to_dict()) for t in trials], out)
+    except JobError as exc:
+        raise SweepError(str(exc).replace("folder '", "trial folder '", 1)) from None
 
 
 # ------------------------------------------------------------------------------------------------------------

@@ -71,19 +71,26 @@ import numpy as np
 
 ENV_ID = "deep-sea-treasure-v0"
 GAMMA = 0.99
-METHODS = ("mope", "eql", "envelope")
+METHODS = ("mope", "eql", "eql-envelope", "envelope")
+#: morl-baselines' Envelope example (examples/envelope_minecart.py) with gamma 0.99 and epsilon decayed over 10k
+#: steps (learning-quality issue): mope's ``envelope`` preset mirrors these settings.
+ENVELOPE_EXAMPLE: dict[str, Any] = {"learning_rate": 3e-4, "batch_size": 64, "net_arch": [256, 256, 256, 256],
+                                    "initial_epsilon": 1.0, "final_epsilon": 0.05, "epsilon_decay_steps": 10_000,
+                                    "initial_homotopy_lambda": 0.0, "final_homotopy_lambda": 1.0,
+                                    "homotopy_decay_steps": 10_000, "learning_starts": 100,
+                                    "target_net_update_freq": 1000, "tau": 1.0, "max_grad_norm": 0.1,
+                                    "buffer_size": 2_000_000, "num_sample_w": 4, "per": True, "per_alpha": 0.6}
 #: Envelope's defaults that matter for cost (morl-baselines 1.3.0): network, batch, number of sampled weights.
 ENVELOPE_NET = (256, 256, 256, 256)
 ENVELOPE_BATCH = 256
 ENVELOPE_NUM_W = 4
 #: Settings of the (b) cost trials: name -> (method, overrides of mope's Config).
 COST_VARIANTS: dict[str, tuple[str, dict[str, Any]]] = {
-    "mope-paper": ("mope", {}),
-    "eql-paper": ("eql", {}),
-    "mope-envelope-equal": ("mope", {"hidden_sizes": ENVELOPE_NET, "batch_size": ENVELOPE_BATCH,
-                                     "n_omega": ENVELOPE_NUM_W}),
-    "eql-envelope-equal": ("eql", {"hidden_sizes": ENVELOPE_NET, "batch_size": ENVELOPE_BATCH,
-                                   "n_omega": ENVELOPE_NUM_W}),
+    "mope-default": ("mope", {}),
+    "eql-default": ("eql", {}),
+    "mope-paper": ("mope", {"preset": "paper"}),
+    "eql-paper": ("eql", {"preset": "paper"}),
+    "eql-envelope-preset": ("eql-envelope", {}),
     "envelope": ("envelope", {}),
 }
 
@@ -111,6 +118,14 @@ class EnvelopePolicy:
             w = torch.as_tensor(np.asarray(prefs), dtype=torch.float32)
             q = self.agent.q_net(o, w)  # (n, A, m); same input as Envelope.max_action: raw obs, then w
             return torch.einsum("nam,nm->na", q, w).argmax(dim=1).numpy()
+
+    def q_values(self, obs: np.ndarray, prefs: np.ndarray) -> np.ndarray:
+        """Vector Q-values, for mope's ground-truth diagnostic."""
+        import torch
+
+        with torch.no_grad():
+            o = torch.as_tensor(np.asarray(obs), dtype=torch.float32).reshape(len(obs), -1)
+            return self.agent.q_net(o, torch.as_tensor(np.asarray(prefs), dtype=torch.float32)).numpy()
 
 
 class EnvelopeRunner:
@@ -186,8 +201,9 @@ class MopeRunner:
     def __init__(self, algo: str, seed: int, total_steps: int, overrides: dict[str, Any] | None = None) -> None:
         import mope
 
-        self.agent = mope.make_agent(algo, ENV_ID, seed=seed, total_steps=total_steps, torch_threads=1,
-                                     **(overrides or {}))
+        extra = {"preset": "envelope"} if algo == "eql-envelope" else {}
+        self.agent = mope.make_agent(algo.split("-")[0], ENV_ID, seed=seed, total_steps=total_steps, torch_threads=1,
+                                     **extra, **(overrides or {}))
 
     @property
     def global_step(self) -> int:
@@ -258,6 +274,8 @@ def flop_per_update(method: str, runner: Any) -> dict[str, float]:
     k = {"batch": b, "both": n + b}.get(c.envelope_prefs, n)  # "relabel" and "own": the rows' own N preferences
     rows_fb = b * n
     rows_f = b * k * (2 if c.double_q else 1)
+    if c.q_head == "convex":  # the network sees states only: one row per transition, whatever N and K are
+        rows_fb, rows_f = b, b * (2 if c.double_q else 1)
     flop = 3 * f_q * rows_fb + f_q * rows_f
     if agent.discriminator is not None:
         f_d = 2.0 * sum(i * o for i, o in linear_layers(agent.discriminator))
@@ -286,6 +304,7 @@ def trial_ttc(method: str, seed: int, steps: int, eval_every: int, stop_at_cover
         curve.append({"step": runner.global_step, "train_s": train_s, "eval_s": ev, "cr": res["cr"],
                       "precision": res["precision"], "recall": res["recall"], "hv": res["hv"],
                       "timeout_share": res["timeout_share"], "optimal_share": res.get("optimal_share", math.nan),
+                      "path_error": res.get("path_error", math.nan), "eum_gap": res.get("eum_gap", math.nan),
                       "mean_len": float(np.mean(sols.lengths))})
         print(f"eval step={runner.global_step} cr={res['cr']:.4f} timeout_share={res['timeout_share']:.3f} "
               f"train_s={train_s:.1f} eval_s={ev:.3f}", file=sys.stderr, flush=True)
@@ -459,6 +478,17 @@ def _ratio(a: float | None, b: float | None) -> str:
     return f"{a / b:.2f}x" if b else "n/a"
 
 
+def _mean_ci(values: list[float]) -> str:
+    """``mean [lo, hi]``: the percentile bootstrap 95% CI of the mean (mope.report's)."""
+    from mope.report import aggregate
+
+    v = [x for x in values if x is not None and not math.isnan(x)]
+    if not v:
+        return "n/a"
+    st = aggregate(v)
+    return f"{st.mean:.3f} [{st.ci_low:.3f}, {st.ci_high:.3f}]"
+
+
 def summarise(results: list[dict[str, Any]], args: argparse.Namespace) -> dict[str, dict[str, Any]]:
     """Per method: time to coverage, failures, eval and RSS figures of the ttc trials; cost and memory rows."""
     summary: dict[str, dict[str, Any]] = {}
@@ -484,6 +514,8 @@ def summarise(results: list[dict[str, Any]], args: argparse.Namespace) -> dict[s
                 "final_cr": [r["curve"][-1]["cr"] for r in ttc],
                 "max_cr": [max(c["cr"] for c in r["curve"]) for r in ttc],
                 "final_timeout_share": [r["curve"][-1]["timeout_share"] for r in ttc],
+                "final_optimal_share": [r["curve"][-1].get("optimal_share", math.nan) for r in ttc],
+                "final_path_error": [r["curve"][-1].get("path_error", math.nan) for r in ttc],
             })
         mem = [r for r in results if r.get("kind") == "memory" and r.get("method") == method and "error" not in r]
         full = [r for r in ttc if r["steps_run"] == args.steps and r["seed"] == args.memory_seed]
@@ -558,6 +590,15 @@ def render(results: list[dict[str, Any]], args: argparse.Namespace, info: dict[s
         lines += [row(f"peak RSS of a {cap}-step run (seed {args.memory_seed}), MiB", "rss_full_run", 0),
                   row(f"training s / 1k steps of that {cap}-step run", "s_per_1k_full_run", 2)]
     if any(s.get("final_cr") for s in summary.values()):
+        lines += ["", "Final evaluation, mean [bootstrap 95% CI] over seeds:", "",
+                  "| method | seeds | final CR | optimal share | path error | time-outs |",
+                  "|---|---:|---:|---:|---:|---:|"]
+        for m in args.methods:
+            s = summary.get(m, {})
+            if s.get("final_cr"):
+                cells = [_mean_ci(s[k]) for k in ("final_cr", "final_optimal_share", "final_path_error",
+                                                    "final_timeout_share")]
+                lines.append(f"| `{m}` | {len(s['final_cr'])} | " + " | ".join(cells) + " |")
         lines += ["", "Per seed (final CR / best CR / final time-out share):", ""]
         for m in args.methods:
             s = summary.get(m, {})
@@ -578,9 +619,10 @@ def render(results: list[dict[str, Any]], args: argparse.Namespace, info: dict[s
             lines.append(f"| {name} | {r['s_per_1k']:.2f} | {ratio} | {r['flop_per_step'] / 1e9:.3f} G | "
                          f"{r['achieved_gflops']:.1f} | {share} | {r['eval_s']:.3f} ({r['eval_timeout_share']:.0%}) | "
                          f"{r['peak_rss_mb']:.0f} |")
-        lines += ["", "Settings: `*-paper`: B = 32, N_omega = 64, hidden 64-128-128-64 (mope's defaults); "
-                  "`*-envelope-equal`: hidden 256x4, B = 256, N_omega = 4 (Envelope's defaults); `envelope`: "
-                  "morl-baselines' defaults. FLOP / step counts the dense layers only (see `flop_per_update`); the "
+        lines += ["", "Settings: `*-default`: mope's defaults (convex head, B = 128, N_omega = 32, hidden 256x3); "
+                  "`*-paper`: the paper preset (B = 32, N_omega = 64, hidden 64-128-128-64); `eql-envelope-preset`: "
+                  "the envelope preset (hidden 256x4, B = 64, N_omega = 4); `envelope`: morl-baselines' Envelope "
+                  "with --envelope-settings. FLOP / step counts the dense layers only (see `flop_per_update`); the "
                   "ceiling is the best single-thread matmul rate of (e)."]
     if ceiling:
         lines += ["", "### (e) the machine's ceiling: single-thread float32 matmul", "",
@@ -603,7 +645,9 @@ def main() -> None:
                         choices=["ttc", "cost", "memory", "ceiling"])
     parser.add_argument("--workers", type=int, default=1, help="trials at a time (1 for clean timings)")
     parser.add_argument("--envelope-kwargs", type=json.loads, default=None,
-                        help="JSON dict of Envelope constructor overrides (default: morl-baselines' defaults)")
+                        help="JSON dict of Envelope constructor overrides (on top of --envelope-settings)")
+    parser.add_argument("--envelope-settings", choices=["defaults", "example"], default="example",
+                        help="Envelope's constructor defaults, or its example's settings (ENVELOPE_EXAMPLE)")
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/envelope"),
                         help="writes OUT.md and OUT.json")
     parser.add_argument("--log-dir", type=Path, default=Path("runs/bench-envelope-logs"),
@@ -628,7 +672,10 @@ def main() -> None:
                      "e.g. `.venv-bench/bin/pip install torch==2.13.0 -e \".[bench]\"`")
 
     def overrides(method: str) -> dict[str, Any] | None:
-        return args.envelope_kwargs if method == "envelope" else None
+        if method != "envelope":
+            return None
+        base = ENVELOPE_EXAMPLE if args.envelope_settings == "example" else {}
+        return {**base, **(args.envelope_kwargs or {})}
 
     specs: list[dict[str, Any]] = []
     if "ceiling" in args.parts:

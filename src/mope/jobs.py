@@ -246,19 +246,25 @@ def _local_backend(jobs: list[tuple[str, str, dict[str, Any], str]], workers: in
 
 def _stop_workers(pool: ProcessPoolExecutor, grace_s: float = 120.0) -> None:
     """Cancel the queued jobs and interrupt the running ones with SIGINT, as Ctrl-C in a terminal would: each
-    saves its resumable state and exits. Wait up to ``grace_s`` for them, then kill what is left."""
+    saves its resumable state and exits. A worker may already hold the next job (the pool feeds ahead), so the
+    interruption is repeated every second until the workers are gone; after ``grace_s``, what is left is killed."""
     import signal
 
     processes = list((getattr(pool, "_processes", None) or {}).values())
     pool.shutdown(wait=False, cancel_futures=True)
-    for proc in processes:
-        with contextlib.suppress(ProcessLookupError, OSError, ValueError):
-            if proc.is_alive():
-                os.kill(proc.pid, signal.SIGINT)
     deadline = time.monotonic() + grace_s
+    while time.monotonic() < deadline:
+        alive = [p for p in processes if p.is_alive()]
+        if not alive:
+            return
+        for proc in alive:
+            with contextlib.suppress(ProcessLookupError, OSError, ValueError):
+                os.kill(proc.pid, signal.SIGINT)
+        for proc in alive:
+            with contextlib.suppress(ValueError, OSError):
+                proc.join(1.0 / len(alive))
     for proc in processes:
         with contextlib.suppress(ValueError, OSError):
-            proc.join(max(0.0, deadline - time.monotonic()))
             if proc.is_alive():
                 proc.kill()
 

@@ -272,3 +272,12 @@ def test_presets() -> None:
     assert Config.from_dict({"preset": "mope"}) == Config()
     with pytest.raises(ConfigError, match="unknown preset 'papr' \\(did you mean 'paper'\\?\\)"):
         Config.from_dict({"preset": "papr"})
+
+
+def test_a_config_saved_by_mope_0_1_reads_with_the_defaults_it_was_trained_with() -> None:
+    saved = {**{k: v for k, v in OLD_DEFAULTS.items() if k not in ("q_head", "learning_rate_end", "target_tau",
+                                                                   "relabel_broad", "lb_homotopy_steps")},
+             "extra": {}, "algo": "mope", "seed": 1}
+    c = Config.from_dict(saved)
+    assert c.q_head == "conditioned" and c.target_tau is None and c.relabel_broad == 0.0 and c.seed == 1
+    assert c.learning_rate_end is None

@@ -338,9 +338,12 @@ class Config:
         """Build from a flat dict (a saved config or overrides). ``algo`` sets the exploration switches;
         ``preset`` (see :data:`PRESETS`) sets defaults that the other keys override.
 
-        ``extra`` (a field of older versions, always empty) is accepted and dropped.
+        A config saved by mope 0.1 (it has the field ``extra``, always empty, and none of 0.2's) is read with the
+        ``paper`` preset's values for the fields it predates, which were 0.1's defaults.
         """
         data = dict(data)
+        if "extra" in data and "q_head" not in data:  # saved by mope 0.1: its defaults are the paper preset's
+            data = {**PRESETS["paper"], **data}
         data.pop("extra", None)
         preset = data.pop("preset", None)
         if preset is not None:

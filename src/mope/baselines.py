@@ -53,7 +53,13 @@ def play_episodes(policy: Callable[[np.ndarray, np.ndarray], np.ndarray], make: 
     """
     if len(seeds) != n:
         raise ConfigError(f"got {len(seeds)} seeds for {n} episodes")
-    envs = [make() for _ in range(n)]
+    from mope.envs.confrontation_batch import ConfrontationBatch
+
+    probe = make()
+    if ConfrontationBatch.supports(probe):  # the game, stepped as arrays: the same episodes, far faster
+        return _play_batched(policy, ConfrontationBatch(probe, n, seeds=list(seeds), record=record), max_steps,
+                             gamma)
+    envs = [probe] + [make() for _ in range(n - 1)]
     obs = np.stack([e.reset(seed=int(s))[0] for e, s in zip(envs, seeds, strict=True)])
     m = int(envs[0].unwrapped.reward_space.shape[0])
     ret, disc = np.zeros((n, m)), np.zeros((n, m))
@@ -80,6 +86,28 @@ def play_episodes(policy: Callable[[np.ndarray, np.ndarray], np.ndarray], make: 
     for e in envs:
         e.close()
     return Episodes(ret, disc, lengths, outcomes, histories)
+
+
+def _play_batched(policy: Callable[[np.ndarray, np.ndarray], np.ndarray], batch: Any, max_steps: int,
+                  gamma: float) -> Episodes:
+    """:func:`play_episodes` on a batched game (:class:`mope.envs.confrontation_batch.ConfrontationBatch`)."""
+    n = batch.n
+    obs = batch.reset()
+    ret, disc = np.zeros((n, 2)), np.zeros((n, 2))
+    lengths = np.zeros(n, dtype=np.int64)
+    running = np.arange(n)
+    g = 1.0
+    for _ in range(max_steps):
+        o, r, term = batch.step(running, np.asarray(policy(obs[running], running)))
+        obs[running] = o
+        ret[running] += r
+        disc[running] += g * r
+        lengths[running] += 1
+        running = running[~term]
+        g *= gamma
+        if running.size == 0:
+            break
+    return Episodes(ret, disc, lengths, batch.outcomes(), batch.histories() if batch.record else [])
 
 
 @dataclass

@@ -122,6 +122,10 @@ class DeepSeaTreasureBatch:
 
 def make_batched(env: gym.Env, n: int, seed: int = 0) -> BatchedEnv:
     """The fastest exact batched version of ``env`` available."""
+    from mope.envs.confrontation_batch import ConfrontationBatch
+
     if DeepSeaTreasureBatch.supports(env):
         return DeepSeaTreasureBatch(env, n)
+    if ConfrontationBatch.supports(env):
+        return ConfrontationBatch(env, n, seed)
     return EnvList(env, n, seed)

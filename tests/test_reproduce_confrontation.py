@@ -73,6 +73,43 @@ def test_train_ppo_learns_a_policy_of_the_right_shape() -> None:
         train_ppo([0.5, 0.6], 128)
 
 
+def test_ppo_trains_on_actions_rescaled_to_the_unit_box_with_no_checker_warning() -> None:
+    import warnings
+
+    from stable_baselines3.common.env_checker import check_env
+
+    from mope.baselines import make_scalarized_env, rescale_to_box
+
+    env = make_scalarized_env(C.CONTINUOUS_ID, np.array([0.5, 0.5]))
+    assert env.action_space.low.tolist() == [-1, -1] and env.action_space.high.tolist() == [1, 1]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env, warn=True)
+    assert not [w for w in caught if "action" in str(w.message).lower()], [str(w.message) for w in caught]
+    box = mo_gym.make(C.CONTINUOUS_ID).action_space
+    np.testing.assert_allclose(rescale_to_box(np.array([[-1.0, 1.0], [0.0, 0.5]]), box), [[-0.2, 0.8], [0.0, 0.4]],
+                               atol=1e-6)
+
+
+def test_reference_policies_reproduce_their_outcome_rates() -> None:
+    from collections import Counter
+
+    from mope.envs.confrontation_batch import play_reference
+
+    seeds = list(range(200))
+    rates = {}
+    for name in ("scripted pursuer", "leave the arena", "pure pursuit", "random"):
+        _, disc, outcomes = play_reference(name, seeds)
+        rates[name] = {k: v / len(seeds) for k, v in Counter(outcomes).items()}
+        rates[name]["disc"] = disc.mean(axis=0)
+    assert 0.5 <= rates["scripted pursuer"].get("red_win", 0) <= 0.7  # measured 0.59 (seeds 0-99)
+    assert rates["scripted pursuer"].get("red_out", 0) == 0
+    assert rates["leave the arena"].get("red_out", 0) >= 0.95  # measured 0.985
+    assert rates["pure pursuit"].get("running", 0) >= 0.9 and rates["pure pursuit"].get("red_win", 0) == 0
+    assert rates["random"].get("blue_win", 0) >= 0.8
+    assert rates["leave the arena"]["disc"][0] > rates["pure pursuit"]["disc"][0]  # the trap: leaving pays on catch
+
+
 def test_record_video_writes_every_frame(tmp_path) -> None:
     info = record_video(lambda obs: 7, C.DISCRETE_ID, None, tmp_path / "game.gif", seed=3, max_steps=6)
     frames = iio.imread(tmp_path / "game.gif")
@@ -107,7 +144,10 @@ def test_reproduce_confrontation_tiny(tmp_path) -> None:
     for name in ("fig5_front.png", "fig6_trajectories.png", "table.md", "results.json"):
         assert (tmp_path / name).is_file()
     res = json.loads((tmp_path / "results.json").read_text())["results"]
-    assert set(res) == {"ppo", "eql", "mope"}
+    assert set(res) == {"ppo", "eql", "mope", "scripted pursuer", "leave the arena", "pure pursuit", "random",
+                        "reference_front_hv"}
+    assert res["scripted pursuer"]["win"]["mean"] > 0.3 and res["leave the arena"]["out"]["mean"] > 0.9
+    assert "| reference: scripted pursuer |" in r["table"] and res["reference_front_hv"] > 0
     for m, n_sol in (("ppo", 2), ("eql", 3), ("mope", 3)):
         rates = sum(res[m][k]["mean"] for k in ("win", "loss", "out", "blue_out", "timeout"))
         assert rates == pytest.approx(1.0) and res[m]["solutions"] == n_sol

@@ -120,14 +120,26 @@ class PPOResult:
 
 
 def make_scalarized_env(env_id: str, pref: np.ndarray, **env_kwargs: Any) -> gym.Env:
-    """``LinearReward(mo_gymnasium.make(env_id), pref)``: the single-objective task of one preference."""
+    """The single-objective task of one preference: ``LinearReward(mo_gymnasium.make(env_id), pref)``, with a
+    continuous action box rescaled to [-1, 1] (``RescaleAction``): SB3's Gaussian policy starts with standard
+    deviation 1, so on the raw box ([-0.2, 0.2] x [-0.8, 0.8] for the confrontation game) most early actions would
+    be clipped to its bounds."""
     import mo_gymnasium as mo_gym
+    from gymnasium.wrappers import RescaleAction, TransformReward
     from mo_gymnasium.wrappers import LinearReward
 
     import mope.envs.confrontation  # noqa: F401 - registers the confrontation ids
 
     env = mo_gym.make(env_id, **env_kwargs)
-    return LinearReward(env, weight=np.asarray(pref, dtype=np.float32))
+    if isinstance(env.action_space, gym.spaces.Box):
+        env = RescaleAction(env, -1.0, 1.0)
+    return TransformReward(LinearReward(env, weight=np.asarray(pref, dtype=np.float32)), float)
+
+
+def rescale_to_box(action: np.ndarray, space: gym.spaces.Box) -> np.ndarray:
+    """Map actions in [-1, 1] (what a policy trained through ``RescaleAction`` outputs) back onto ``space``."""
+    x = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+    return space.low + (x + 1.0) * 0.5 * (space.high - space.low)
 
 
 def train_ppo(pref: Any, steps: int, seed: int = 0, env_id: str = "mope/RobotConfrontation-v0",
@@ -152,11 +164,13 @@ def train_ppo(pref: Any, steps: int, seed: int = 0, env_id: str = "mope/RobotCon
     return model
 
 
-def ppo_policy(model: Any) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
-    """A batched deterministic policy for :func:`play_episodes`."""
+def ppo_policy(model: Any, space: gym.spaces.Box | None = None) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """A batched deterministic policy for :func:`play_episodes`; with ``space``, the model's [-1, 1] actions (it
+    was trained through ``RescaleAction``) are mapped back onto that box."""
 
     def act(obs: np.ndarray, _idx: np.ndarray) -> np.ndarray:
-        return model.predict(obs, deterministic=True)[0]
+        a = model.predict(obs, deterministic=True)[0]
+        return rescale_to_box(a, space) if space is not None else a
 
     return act
 
@@ -185,6 +199,7 @@ def ppo_baseline(steps: int, n_prefs: int = 11, seed: int = 0, episodes: int = 5
         out.append(PPOResult(np.asarray(w), model))
     limit = max_steps or gym.spec(env_id).max_episode_steps or 1000
     for res in out:
-        res.episodes = play_episodes(ppo_policy(res.model), lambda: mo_gym.make(env_id).unwrapped, episodes,
+        space = mo_gym.make(env_id).action_space
+        res.episodes = play_episodes(ppo_policy(res.model, space), lambda: mo_gym.make(env_id).unwrapped, episodes,
                                      [eval_seed + j for j in range(episodes)], limit, gamma)
     return out

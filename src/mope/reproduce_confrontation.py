@@ -43,6 +43,9 @@ from mope.jobs import Job, run_jobs
 from mope.locks import FolderLock
 
 METHODS = ("ppo", "eql", "mope")
+#: Red's reference policies (mope.envs.confrontation_batch.REFERENCE_POLICIES), one point each: the points a
+#: learner must reach or pass, evaluated from the same initial states as the agents.
+REFERENCES = ("scripted pursuer", "leave the arena", "pure pursuit", "random")
 EVAL_SEED = 10_000
 FIG6_PREFS = ((0.0, 1.0), (0.25, 0.75), (0.5, 0.5), (0.75, 0.25), (1.0, 0.0))
 COLORS = {"ppo": "tab:orange", "eql": "tab:gray", "mope": "tab:green"}
@@ -128,14 +131,14 @@ def evaluate_ppo(folders: list[Path], episodes: int, gamma: float = 0.99) -> tup
     import mo_gymnasium as mo_gym
     from stable_baselines3 import PPO
 
-    from mope.baselines import Episodes, play_episodes
+    from mope.baselines import Episodes, play_episodes, ppo_policy
 
     prefs, parts = [], []
     for folder in folders:
         meta = json.loads((folder / "summary.json").read_text())["meta"]
         model = PPO.load(folder / "policy.zip", device="cpu")
         prefs.append(meta["pref"])
-        parts.append(play_episodes(lambda obs, idx, mdl=model: mdl.predict(obs, deterministic=True)[0],
+        parts.append(play_episodes(ppo_policy(model, conf.RobotConfrontationEnv().action_space),
                                    lambda: mo_gym.make(conf.CONTINUOUS_ID).unwrapped, episodes,
                                    [EVAL_SEED + j for j in range(episodes)], conf.DEFAULT_HORIZON, gamma))
     eps = Episodes(np.concatenate([e.returns for e in parts]), np.concatenate([e.discounted for e in parts]),
@@ -146,8 +149,9 @@ def evaluate_ppo(folders: list[Path], episodes: int, gamma: float = 0.99) -> tup
 # ------------------------------------------------------------------------------------------------------------
 # figures
 # ------------------------------------------------------------------------------------------------------------
-def plot_fig5(points: dict[str, np.ndarray], path: Path) -> Path:
-    """Fig. 5: each method's solutions in (r_catch, r_move) space, with its Pareto front as a dashed line."""
+def plot_fig5(points: dict[str, np.ndarray], path: Path, references: dict[str, np.ndarray] | None = None) -> Path:
+    """Fig. 5: each method's solutions in (r_catch, r_move) space, with its Pareto front as a dashed line; the
+    reference policies as black markers."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -162,6 +166,8 @@ def plot_fig5(points: dict[str, np.ndarray], path: Path) -> Path:
         front = pareto_front(pts)
         front = front[np.argsort(front[:, 0])]
         ax.plot(front[:, 0], front[:, 1], "--", color=c, lw=1.6)
+    for (name, pt), marker in zip((references or {}).items(), "XPD*", strict=False):
+        ax.scatter([pt[0]], [pt[1]], s=70, marker=marker, color="k", label=f"reference: {name}", zorder=5)
     ax.axvline(10, color="k", lw=0.6, ls=":")
     ax.text(10, ax.get_ylim()[1], " catch = 10", fontsize=7, va="top")
     ax.set_xlabel("r_catch (episode return, mean over episodes)")
@@ -237,6 +243,8 @@ def check_confrontation_args(seeds: int, steps: int, ppo_prefs: int, eval_prefs:
 def evaluate_confrontation(out: Path, seeds: int, ppo_prefs: int, eval_prefs: int, episodes: int,
                            max_steps: int | None) -> tuple[dict[str, list[dict[str, Any]]], Any]:
     """Every method's summary per seed, and MoPE's recorded Fig. 6 games (seed 0)."""
+    from mope.baselines import Episodes
+    from mope.envs.confrontation_batch import play_reference
     from mope.preferences import equally_spaced
 
     probe = conf.RobotConfrontationEnv()
@@ -252,6 +260,11 @@ def evaluate_confrontation(out: Path, seeds: int, ppo_prefs: int, eval_prefs: in
             eps, g = evaluate_agent(out / f"{a}-s{s}", eval_w, episodes, fig6_w if (a == "mope" and s == 0) else None)
             games = g if g is not None else games
             per_seed[a].append(summarize(eval_w, eps, episodes, ref, probe.dt, probe.v_max))
+    for name in REFERENCES:
+        ret, disc, outcomes = play_reference(name, [EVAL_SEED + j for j in range(episodes)] * eval_prefs,
+                                             max(max_steps or 0, conf.DEFAULT_HORIZON))
+        eps = Episodes(ret, disc, np.full(len(ret), 0), outcomes)
+        per_seed[name] = [summarize(np.full((1, 2), 0.5), eps, len(ret), ref, probe.dt, probe.v_max)]
     return per_seed, games
 
 
@@ -259,7 +272,7 @@ def confrontation_results(out: Path, per_seed: dict[str, list[dict[str, Any]]], 
     """Mean and std over seeds of every table metric, plus seed 0's solutions and the agents' training time."""
     keys = ("hv", "win", "loss", "out", "blue_out", "timeout", "strategies", "entropy_bits", "r_catch", "r_move")
     results: dict[str, Any] = {}
-    for m in METHODS:
+    for m in (*METHODS, *REFERENCES):
         vals = {k: np.array([r[k] for r in per_seed[m]], dtype=np.float64) for k in keys}
         results[m] = {k: {"mean": float(v.mean()), "std": float(v.std())} for k, v in vals.items()}
         results[m]["solutions"] = len(per_seed[m][0]["points"])
@@ -269,6 +282,13 @@ def confrontation_results(out: Path, per_seed: dict[str, list[dict[str, Any]]], 
         walls = [json.loads((out / f"{a}-s{s}" / "summary.json").read_text()) for s in range(seeds)]
         results[a]["train_wall_s"] = float(np.mean([w.get("wall_s", np.nan) for w in walls]))
     return results
+
+
+def reference_front_hv(per_seed: dict[str, list[dict[str, Any]]], ref: np.ndarray) -> float:
+    """Hypervolume of the reference policies' points taken together (their front)."""
+    from mope.metrics import hypervolume
+
+    return float(hypervolume(np.concatenate([per_seed[r][0]["points"] for r in REFERENCES]), ref))
 
 
 def confrontation_table(results: dict[str, Any], seeds: int, steps: int, ppo_steps: int, ppo_prefs: int,
@@ -282,10 +302,12 @@ def confrontation_table(results: dict[str, Any], seeds: int, steps: int, ppo_ste
     header = ["method", "policies x prefs", "steps per policy", "HV", "win", "loss", "out of arena", "time-out",
               "strategies (entropy, bits)", "mean r_catch", "mean r_move"]
     rows = []
-    for m in METHODS:
+    for m in (*METHODS, *REFERENCES):
         r = results[m]
-        shape = f"{ppo_prefs} x 1" if m == "ppo" else f"1 x {eval_prefs}"
-        rows.append([m, shape, f"{ppo_steps if m == 'ppo' else steps:,}", pm(r["hv"], ".1f"), pm(r["win"], ".3f"),
+        shape = f"{ppo_prefs} x 1" if m == "ppo" else "1 (scripted)" if m in REFERENCES else f"1 x {eval_prefs}"
+        budget = "-" if m in REFERENCES else f"{ppo_steps if m == 'ppo' else steps:,}"
+        name = f"reference: {m}" if m in REFERENCES else m
+        rows.append([name, shape, budget, pm(r["hv"], ".1f"), pm(r["win"], ".3f"),
                      pm(r["loss"], ".3f"), pm(r["out"], ".3f"), pm(r["timeout"], ".3f"),
                      f"{pm(r['strategies'], '.1f')} ({pm(r['entropy_bits'], '.2f')})", pm(r["r_catch"], ".2f"),
                      pm(r["r_move"], ".2f")])
@@ -332,10 +354,14 @@ def reproduce_confrontation(out: str | Path, seeds: int = 1, steps: int = 15_000
         per_seed, games = evaluate_confrontation(out, seeds, ppo_prefs, eval_prefs, episodes,
                                                  overrides.get("max_episode_steps"))
         eval_wall = time.perf_counter() - t1
-        plot_fig5({m: per_seed[m][0]["points"] for m in METHODS}, out / "fig5_front.png")
+        plot_fig5({m: per_seed[m][0]["points"] for m in METHODS}, out / "fig5_front.png",
+                  {r: per_seed[r][0]["points"][0] for r in REFERENCES})
         plot_fig6(games, np.asarray(FIG6_PREFS), conf.RobotConfrontationEnv().half, out / "fig6_trajectories.png")
         results = confrontation_results(out, per_seed, seeds)
+        results["reference_front_hv"] = reference_front_hv(
+            per_seed, conf.reference_point(1.0, max(overrides.get("max_episode_steps") or 0, conf.DEFAULT_HORIZON)))
         table = confrontation_table(results, seeds, steps, ppo_steps, ppo_prefs, eval_prefs)
+        table += f"\n\nHV of the four reference policies' front: {results['reference_front_hv']:.1f}"
         (out / "table.md").write_text(table + "\n")
         ref = conf.reference_point(1.0, max(overrides.get("max_episode_steps") or 0, conf.DEFAULT_HORIZON))
         (out / "results.json").write_text(json.dumps({

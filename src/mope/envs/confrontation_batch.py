@@ -169,3 +169,65 @@ class ConfrontationBatch:
     def outcomes(self) -> list[str]:
         """The latest outcome of every game (``running`` for one cut by the time limit)."""
         return [conf.OUTCOMES[i] for i in self.outcome]
+
+
+# ------------------------------------------------------------------------------------------------------------
+# reference policies for red (the points a learner must reach or pass)
+# ------------------------------------------------------------------------------------------------------------
+def _scripted(batch: ConfrontationBatch, idx: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    env = batch.base
+    return np.stack([conf.scripted_pursuer(batch.red[i], batch.blue[i], env.half, env.a_max, env.w_max, env.v_max,
+                                           env.dt) for i in idx])
+
+
+def _leave(batch: ConfrontationBatch, idx: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Full speed to the nearest wall and out of the arena."""
+    env = batch.base
+    red = batch.red[idx]
+    gaps = np.stack([env.half - red[:, 0], env.half + red[:, 0], env.half - red[:, 1], env.half + red[:, 1]], 1)
+    desired = np.array([0.0, np.pi, np.pi / 2, -np.pi / 2])[np.argmin(gaps, axis=1)]
+    w = np.clip(2.0 * conf.wrap_angle(desired - red[:, 2]), -env.w_max, env.w_max)
+    return np.stack([np.full(len(idx), env.a_max), w], axis=1)
+
+
+def _pursuit(batch: ConfrontationBatch, idx: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    env = batch.base
+    red, blue = batch.red[idx], batch.blue[idx]
+    bearing = np.arctan2(blue[:, 1] - red[:, 1], blue[:, 0] - red[:, 0])
+    w = np.clip(2.0 * conf.wrap_angle(bearing - red[:, 2]), -env.w_max, env.w_max)
+    return np.stack([np.full(len(idx), env.a_max), w], axis=1)  # steer at blue, always at full speed
+
+
+def _random(batch: ConfrontationBatch, idx: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    env = batch.base
+    return rng.uniform([-env.a_max, -env.w_max], [env.a_max, env.w_max], size=(len(idx), 2))
+
+
+#: Red's reference policies: name -> (batch, running games, rng) -> ``(k, 2)`` continuous actions.
+REFERENCE_POLICIES = {"scripted pursuer": _scripted, "leave the arena": _leave, "pure pursuit": _pursuit,
+                      "random": _random}
+
+
+def play_reference(name: str, seeds: list[int], max_steps: int = conf.DEFAULT_HORIZON, gamma: float = 0.99,
+                   rng_seed: int = 0, **env_kwargs: object) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Play a reference policy for red on the continuous game, one episode per reset seed.
+
+    Returns:
+        ``(returns, discounted, outcomes)``: ``(n, 2)`` undiscounted and discounted returns, each episode's outcome.
+    """
+    if name not in REFERENCE_POLICIES:
+        raise KeyError(f"unknown reference policy '{name}'; choose one of {', '.join(REFERENCE_POLICIES)}")
+    policy = REFERENCE_POLICIES[name]
+    batch = ConfrontationBatch(conf.RobotConfrontationEnv(**env_kwargs), len(seeds), seeds=list(seeds))
+    rng = np.random.default_rng(rng_seed)
+    batch.reset()
+    ret, disc = np.zeros((batch.n, 2)), np.zeros((batch.n, 2))
+    running, g = np.arange(batch.n), 1.0
+    for _ in range(max_steps):
+        _, r, term = batch.step(running, policy(batch, running, rng))
+        ret[running] += r
+        disc[running] += g * r
+        running, g = running[~term], g * gamma
+        if not running.size:
+            break
+    return ret, disc, batch.outcomes()

@@ -72,18 +72,6 @@ import numpy as np
 ENV_ID = "deep-sea-treasure-v0"
 GAMMA = 0.99
 METHODS = ("mope", "eql", "eql-envelope", "envelope")
-#: morl-baselines' Envelope example (examples/envelope_minecart.py) with gamma 0.99 and epsilon decayed over 10k
-#: steps (learning-quality issue): mope's ``envelope`` preset mirrors these settings.
-ENVELOPE_EXAMPLE: dict[str, Any] = {"learning_rate": 3e-4, "batch_size": 64, "net_arch": [256, 256, 256, 256],
-                                    "initial_epsilon": 1.0, "final_epsilon": 0.05, "epsilon_decay_steps": 10_000,
-                                    "initial_homotopy_lambda": 0.0, "final_homotopy_lambda": 1.0,
-                                    "homotopy_decay_steps": 10_000, "learning_starts": 100,
-                                    "target_net_update_freq": 1000, "tau": 1.0, "max_grad_norm": 0.1,
-                                    "buffer_size": 2_000_000, "num_sample_w": 4, "per": True, "per_alpha": 0.6}
-#: Envelope's defaults that matter for cost (morl-baselines 1.3.0): network, batch, number of sampled weights.
-ENVELOPE_NET = (256, 256, 256, 256)
-ENVELOPE_BATCH = 256
-ENVELOPE_NUM_W = 4
 #: Settings of the (b) cost trials: name -> (method, overrides of mope's Config).
 COST_VARIANTS: dict[str, tuple[str, dict[str, Any]]] = {
     "mope-default": ("mope", {}),
@@ -102,97 +90,6 @@ def peak_rss_mb() -> float:
     """Peak resident set size of this process in MiB (Linux reports ``ru_maxrss`` in KiB)."""
     kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return kb / 1024 if sys.platform != "darwin" else kb / 2**20
-
-
-class EnvelopePolicy:
-    """mope's ``GreedyPolicy`` protocol over an Envelope agent: one batched Q-network pass per call."""
-
-    def __init__(self, agent: Any) -> None:
-        self.agent = agent
-
-    def greedy_actions(self, obs: np.ndarray, prefs: np.ndarray) -> np.ndarray:
-        import torch
-
-        with torch.no_grad():
-            o = torch.as_tensor(np.asarray(obs), dtype=torch.float32).reshape(len(obs), -1)
-            w = torch.as_tensor(np.asarray(prefs), dtype=torch.float32)
-            q = self.agent.q_net(o, w)  # (n, A, m); same input as Envelope.max_action: raw obs, then w
-            return torch.einsum("nam,nm->na", q, w).argmax(dim=1).numpy()
-
-    def q_values(self, obs: np.ndarray, prefs: np.ndarray) -> np.ndarray:
-        """Vector Q-values, for mope's ground-truth diagnostic."""
-        import torch
-
-        with torch.no_grad():
-            o = torch.as_tensor(np.asarray(obs), dtype=torch.float32).reshape(len(obs), -1)
-            return self.agent.q_net(o, torch.as_tensor(np.asarray(prefs), dtype=torch.float32)).numpy()
-
-
-class EnvelopeRunner:
-    """morl-baselines' Envelope, trained in chunks that continue one another exactly (see the module docstring)."""
-
-    def __init__(self, seed: int, overrides: dict[str, Any] | None = None) -> None:
-        import mo_gymnasium as mo_gym
-        from mo_gymnasium.wrappers import MORecordEpisodeStatistics
-        from morl_baselines.common.evaluation import seed_everything
-        from morl_baselines.common.weights import random_weights
-        from morl_baselines.multi_policy.envelope.envelope import Envelope
-
-        seed_everything(seed)
-        env = MORecordEpisodeStatistics(mo_gym.make(ENV_ID), gamma=GAMMA)
-        env.action_space.seed(seed)
-        kwargs: dict[str, Any] = {"gamma": GAMMA, "log": False, "seed": seed, "device": "cpu", **(overrides or {})}
-        self.agent = Envelope(env, **kwargs)
-        self._random_weights = random_weights
-        self.env = env
-        self.agent.global_step = 0
-        self.agent.num_episodes = 0
-        self.obs, _ = env.reset(seed=seed)
-        self._new_weight()
-
-    def _new_weight(self) -> None:
-        import torch
-
-        a = self.agent
-        self.w = self._random_weights(a.reward_dim, 1, dist="gaussian", rng=a.np_random)
-        self.tensor_w = torch.tensor(self.w).float().to(a.device)
-
-    @property
-    def global_step(self) -> int:
-        return int(self.agent.global_step)
-
-    def train(self, steps: int) -> None:
-        """``steps`` iterations of ``Envelope.train``'s loop body (morl-baselines 1.3.0), logging left out."""
-        import torch
-
-        a, env = self.agent, self.env
-        for _ in range(steps):
-            if a.global_step < a.learning_starts:
-                action = env.action_space.sample()
-            else:
-                action = a.act(torch.as_tensor(self.obs).float().to(a.device), self.tensor_w)
-            next_obs, vec_reward, terminated, truncated, _ = env.step(action)
-            a.global_step += 1
-            a.replay_buffer.add(self.obs, action, vec_reward, next_obs, terminated)
-            if a.global_step >= a.learning_starts:
-                a.update()
-            if terminated or truncated:
-                self.obs, _ = env.reset()
-                a.num_episodes += 1
-                self._new_weight()
-            else:
-                self.obs = next_obs
-
-    def policy(self) -> EnvelopePolicy:
-        return EnvelopePolicy(self.agent)
-
-    @property
-    def learning_starts(self) -> int:
-        return int(self.agent.learning_starts)
-
-    @property
-    def q_net(self) -> Any:
-        return self.agent.q_net
 
 
 class MopeRunner:
@@ -226,7 +123,9 @@ class MopeRunner:
 
 def make_runner(method: str, seed: int, total_steps: int, overrides: dict[str, Any] | None = None) -> Any:
     if method == "envelope":
-        return EnvelopeRunner(seed, overrides)
+        from mope.peers import EnvelopeRunner
+
+        return EnvelopeRunner(ENV_ID, seed, GAMMA, overrides)
     return MopeRunner(method, seed, total_steps, overrides)
 
 
@@ -674,6 +573,8 @@ def main() -> None:
     def overrides(method: str) -> dict[str, Any] | None:
         if method != "envelope":
             return None
+        from mope.peers import ENVELOPE_EXAMPLE
+
         base = ENVELOPE_EXAMPLE if args.envelope_settings == "example" else {}
         return {**base, **(args.envelope_kwargs or {})}
 

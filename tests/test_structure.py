@@ -234,3 +234,33 @@ def test_an_interrupted_reproduction_resumes_through_the_job_runner(tmp_path: Pa
 def _rows(folder: Path) -> list[dict[str, str]]:
     with open(folder / "metrics.csv") as f:
         return [{k: v for k, v in r.items() if k != "wall_s"} for r in csv.DictReader(f)]
+
+
+# ------------------------------------------------------------------------------------------- benchmark
+@pytest.mark.parametrize(("args", "needle"), [
+    (["--envs", "deep-sea-treasur-v0"], "unknown environment 'deep-sea-treasur-v0'"),
+    (["--methods", "mopee"], "unknown method 'mopee' (did you mean 'mope'?)"),
+    (["--envs", "mope/RobotConfrontation-v0"], "continuous action space"),
+    (["--steps", "0"], "--steps 0 is out of range"),
+    (["--seeds", "0"], "--seeds 0 is out of range"),
+])
+def test_benchmark_bad_input_is_one_line(tmp_path: Path, args: list[str], needle: str) -> None:
+    res = cli("benchmark", "--out", str(tmp_path / "b"), "--methods", "mope", *args)
+    assert res.returncode == 2 and needle in res.stderr, res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1 and "Traceback" not in res.stderr
+
+
+@pytest.mark.slow
+def test_benchmark_quick_runs_and_keeps_finished_runs(tmp_path: Path) -> None:
+    out = tmp_path / "bench"
+    res = cli("benchmark", "--quick", "--out", str(out), "--no-progress")
+    assert res.returncode == 0, res.stderr
+    text = (out / "benchmark.md").read_text()
+    for env_id in ("deep-sea-treasure-v0", "resource-gathering-v0", "minecart-deterministic-v0", "four-room-v0"):
+        assert f"## {env_id}" in text and (out / f"{env_id}.png").is_file()
+    summary = json.loads((out / "benchmark.json").read_text())["summary"]
+    assert summary["deep-sea-treasure-v0"]["_meta"]["known_front"] is True
+    assert summary["four-room-v0"]["_meta"]["known_front"] is False
+    stamp = (out / "deep-sea-treasure-v0-mope-s0" / "summary.json").stat().st_mtime
+    again = cli("benchmark", "--quick", "--out", str(out), "--no-progress")  # a re-run keeps the finished runs
+    assert again.returncode == 0 and (out / "deep-sea-treasure-v0-mope-s0" / "summary.json").stat().st_mtime == stamp

@@ -359,6 +359,43 @@ def sweep(
 
 
 @app.command()
+def benchmark(
+    out: Annotated[Path, typer.Option(help="Folder of the runs (and of the report, unless --report-dir).")] = Path(
+        "runs/benchmark"),
+    envs: Annotated[str | None, typer.Option(help="Comma-separated environments [default: all of the benchmark's]")
+                    ] = None,
+    methods: Annotated[str | None, typer.Option(
+        help="Comma-separated: mope, eql, mope-paper, eql-paper, envelope "
+             "\\[default: mope,eql,mope-paper, and envelope when morl-baselines is installed]")] = None,
+    seeds: Annotated[int, typer.Option(help="Seeds per environment and method.")] = 5,
+    quick: Annotated[bool, typer.Option(help="One seed, small budgets: a first look (CI runs it).")] = False,
+    steps: Annotated[int | None, typer.Option(help="Budget of every environment [default: each one's own]")] = None,
+    workers: Annotated[int | None, typer.Option(help="Jobs at once [default: all cores]")] = None,
+    backend: Annotated[str, typer.Option(help="local (processes) or ray.")] = "local",
+    address: Annotated[str | None, typer.Option(help="Ray address: auto, ray://host:10001.")] = None,
+    report_dir: Annotated[Path | None, typer.Option(help="Where the table and figures go [default: --out]")] = None,
+    progress: Annotated[bool, typer.Option(help="Show the live line.")] = True,
+) -> None:
+    """mope's variants beside morl-baselines' Envelope on several environments: one table and figure per env."""
+    from mope.benchmark import run_benchmark
+
+    def split(text: str | None) -> list[str] | None:
+        return [x.strip() for x in text.split(",") if x.strip()] if text else None
+
+    try:
+        res = run_benchmark(out, split(envs), split(methods), seeds, quick, steps, workers, backend, address,
+                            report_dir, progress, command="mope " + " ".join(sys.argv[1:]))
+    except MopeError as exc:
+        _fail(str(exc))
+        return
+    except KeyboardInterrupt:
+        typer.echo("\ninterrupted; run the same command again to resume", err=True)
+        raise typer.Exit(130) from None
+    typer.echo(res["table"])
+    typer.echo(f"table and figures in {res['out']} ({res['wall_s']:.0f} s)")
+
+
+@app.command()
 def report(
     runs_dir: Annotated[Path, typer.Argument(help="Sweep folder or any folder of runs.")],
     out: Annotated[Path | None, typer.Option(help="Output folder (default RUNS_DIR/report).")] = None,

@@ -25,6 +25,7 @@ import csv
 import json
 import os
 import platform
+import resource
 import shutil
 import signal
 import threading
@@ -319,7 +320,9 @@ def _finish_run(agent: MoPE, config: Config, out: Path, all_records: list[dict],
     final = all_records[-1] if all_records else {}
     if agent.last_solutions is not None:
         write_solutions(out / "solutions.csv", agent.last_solutions)  # the final evaluation's solutions
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # KiB on Linux: this process's peak so far
     summary = {"final": final, "wall_s": agent.wall_s, "s_per_1k_steps": 1000 * agent.wall_s / config.total_steps,
+               "peak_rss_mb": peak_mb,
                "algo": config.algo, "env_id": config.env_id, "seed": config.seed, "resumed": status == "resumable",
                "versions": _environment_info()}
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")

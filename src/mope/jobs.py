@@ -81,7 +81,47 @@ def _ppo_job(payload: dict[str, Any], out: Path) -> dict[str, Any]:
     return final
 
 
-JOB_KINDS: dict[str, Callable[[dict[str, Any], Path], dict[str, Any]]] = {"train": _train_job, "ppo": _ppo_job}
+def _envelope_job(payload: dict[str, Any], out: Path) -> dict[str, Any]:
+    """morl-baselines' Envelope (:class:`mope.peers.EnvelopeRunner`), evaluated with mope's protocol every
+    ``eval_every`` steps; writes ``peer.json``, ``metrics.csv`` and ``summary.json`` like a run folder (it cannot
+    resume: an interrupted Envelope job starts over)."""
+    import csv
+    import resource
+
+    from mope.config import Config
+    from mope.envs import make_env
+    from mope.evaluation import Evaluator
+    from mope.experiments import METRIC_COLUMNS
+    from mope.peers import EnvelopeRunner
+
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "peer.json").write_text(json.dumps({"method": "envelope", **payload}, indent=2) + "\n")
+    cfg = Config(env_id=payload["env_id"], seed=payload["seed"], total_steps=payload["total_steps"],
+                 eval_prefs=payload["eval_prefs"], max_episode_steps=payload.get("max_episode_steps"))
+    runner = EnvelopeRunner(cfg.env_id, cfg.seed, payload.get("gamma", 0.99), payload.get("overrides"),
+                            cfg.max_episode_steps)
+    evaluator = Evaluator.from_config(make_env(cfg.env_id, cfg.max_episode_steps), cfg)
+    rows, train_s = [], 0.0
+    with open(out / "metrics.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=METRIC_COLUMNS, extrasaction="ignore")
+        writer.writeheader()
+        while runner.global_step < cfg.total_steps:
+            t0 = time.perf_counter()
+            runner.train(min(payload["eval_every"], cfg.total_steps - runner.global_step))
+            train_s += time.perf_counter() - t0
+            res, _ = evaluator.evaluate(runner.policy())
+            rows.append({"step": runner.global_step, "wall_s": train_s, **res})
+            writer.writerow({k: rows[-1].get(k, float("nan")) for k in METRIC_COLUMNS})
+            f.flush()
+    final = rows[-1]
+    summary = {"final": final, "wall_s": train_s, "s_per_1k_steps": 1000 * train_s / cfg.total_steps,
+               "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "method": "envelope"}
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
+    return final
+
+
+JOB_KINDS: dict[str, Callable[[dict[str, Any], Path], dict[str, Any]]] = {"train": _train_job, "ppo": _ppo_job,
+                                                                           "envelope": _envelope_job}
 
 
 #: Fields that do not change a run's results; a finished run whose saved config differs only in these is reused.
@@ -223,10 +263,11 @@ class _Summary:
 
 
 def _local_backend(jobs: list[tuple[str, str, dict[str, Any], str]], workers: int,
-                   on_done: Callable[[dict[str, Any]], None], on_running: Callable[[int], None]) -> None:
+                   on_done: Callable[[dict[str, Any]], None], on_running: Callable[[int], None],
+                   fresh: bool = False) -> None:
     method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context(method),
-                               initializer=_init_worker)
+                               initializer=_init_worker, max_tasks_per_child=1 if fresh else None)
     try:
         pending: set[Future] = {pool.submit(run_job, *job) for job in jobs}
         while pending:
@@ -319,7 +360,8 @@ def check_backend(backend: str, address: str | None, workers: int | None) -> Non
 
 def run_jobs(jobs: list[Job], out: Path, backend: str = "local", workers: int | None = None,
              address: str | None = None, progress: bool = True, desc: str = "jobs",
-             on_done: Callable[[dict[str, Any]], None] | None = None) -> dict[str, dict[str, Any]]:
+             on_done: Callable[[dict[str, Any]], None] | None = None, fresh_processes: bool = False
+             ) -> dict[str, dict[str, Any]]:
     """Run every job into ``out/<job.name>``; finished ones are skipped, interrupted ones resumed.
 
     Args:
@@ -331,6 +373,7 @@ def run_jobs(jobs: list[Job], out: Path, backend: str = "local", workers: int | 
         progress: Show the live line.
         desc: Its label.
         on_done: Called with each job's record as it finishes (skipped ones included).
+        fresh_processes: Run every job in a new process (local backend), so each job's peak memory is its own.
 
     Returns:
         Job name -> ``{"name", "status", "action", "final", "wall_s", "error"}``.
@@ -344,7 +387,7 @@ def run_jobs(jobs: list[Job], out: Path, backend: str = "local", workers: int | 
     (out / BATCH_MARKER).write_text("a folder of mope jobs\n")
     records: dict[str, dict[str, Any]] = {}
     for job in jobs:
-        if job_done(job, out) and job.kind == "train":
+        if job_done(job, out) and job.kind in ("train", "envelope"):
             final = json.loads((out / job.name / "summary.json").read_text()).get("final", {})
             records[job.name] = {"name": job.name, "status": "finished", "action": "skipped", "final": final,
                                  "wall_s": 0.0, "error": None}
@@ -362,7 +405,8 @@ def run_jobs(jobs: list[Job], out: Path, backend: str = "local", workers: int | 
     try:
         with _sigterm_as_interrupt():
             if todo and backend == "local":
-                _local_backend(todo, min(workers or os.cpu_count() or 1, len(todo)), done, summary.set_running)
+                _local_backend(todo, min(workers or os.cpu_count() or 1, len(todo)), done, summary.set_running,
+                               fresh_processes)
             elif todo:
                 _ray_backend(todo, out, workers, address, done, summary.set_running)
     finally:

@@ -1,0 +1,330 @@
+"""``mope benchmark``: mope's variants beside morl-baselines' Envelope on several MO-Gymnasium environments.
+
+One command trains and evaluates a grid of (environment, method, seed) in one run, through the job runner
+(:mod:`mope.jobs`: local processes or Ray, every job in a fresh process so its peak memory is its own; a re-run
+keeps the finished jobs and resumes the interrupted ones), then writes one table and one figure per environment.
+
+Methods: ``mope`` and ``eql`` (the defaults), ``mope-paper`` and ``eql-paper`` (the paper preset), and
+``envelope`` (morl-baselines' Envelope at its example's settings, :data:`mope.peers.ENVELOPE_EXAMPLE`; needs the
+optional ``bench`` extra). Environments and their evaluation settings and budgets: :data:`BENCH_ENVS`.
+
+Per environment and method: CR where the front is known, EUM and its gap to the optimum, HV, the optimal share,
+time-outs, the steps and training seconds until CR = 1 (or, without a known front, until 95 % of the best final
+EUM any method reached), training seconds per 1k steps and peak memory: means with bootstrap 95 % CIs over seeds,
+and the ratio of each mean to Envelope's from the same run.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mope.config import Config
+from mope.errors import ConfigError, MopeError, suggest
+from mope.jobs import Job, run_jobs
+from mope.locks import FolderLock
+
+
+@dataclass(frozen=True)
+class EnvBench:
+    """How one environment is benchmarked.
+
+    Attributes:
+        steps: Full budget (environment steps per run); ``source`` says where it comes from.
+        quick_steps: Budget of ``--quick``.
+        eval_every: Steps between evaluations (full mode; quick mode evaluates 3 times).
+        eval_prefs: Uniform preferences per evaluation.
+        max_episode_steps: Episode cap of training and evaluation (None: the registered limit).
+        source: Where the budget comes from.
+    """
+
+    steps: int
+    quick_steps: int
+    eval_every: int
+    eval_prefs: int
+    max_episode_steps: int | None
+    source: str
+
+
+#: The environments of the benchmark, each with its evaluation settings and budget.
+BENCH_ENVS: dict[str, EnvBench] = {
+    "deep-sea-treasure-v0": EnvBench(20_000, 3_000, 1_000, 2_000, None,
+                                     "the MoPE paper (Fig. 2) and Yang et al.: 20k steps, 2,000 preferences"),
+    "resource-gathering-v0": EnvBench(50_000, 3_000, 2_500, 500, None,
+                                      "no published EQL budget: 2.5x Deep-Sea-Treasure's (a 5x5 grid, 3 objectives, "
+                                      "the front's 3 points need the enemy-free detours)"),
+    "minecart-deterministic-v0": EnvBench(100_000, 3_000, 5_000, 100, 1_000,
+                                          "morl-baselines' Envelope example (examples/envelope_minecart.py): 100k "
+                                          "steps; 100 preferences (each episode can last 1,000 steps)"),
+    "four-room-v0": EnvBench(50_000, 3_000, 2_500, 200, None,
+                             "no published front or budget: 50k steps (a 13x13 grid, 3 objectives); HV and EUM "
+                             "against the best any method found"),
+}
+#: Methods: name -> config settings (``envelope`` is morl-baselines' Envelope).
+METHODS: dict[str, dict[str, Any]] = {"mope": {"algo": "mope"}, "eql": {"algo": "eql"},
+                                      "mope-paper": {"algo": "mope", "preset": "paper"},
+                                      "eql-paper": {"algo": "eql", "preset": "paper"}, "envelope": {}}
+DEFAULT_METHODS = ("mope", "eql", "mope-paper", "envelope")
+
+
+def check_choices(envs: list[str], methods: list[str], seeds: int, steps: int | None) -> None:
+    """One-line errors for an unknown environment or method, a continuous-action environment, or a budget <= 0."""
+    from mope.envs import make_env
+
+    for env_id in envs:
+        if env_id not in BENCH_ENVS:
+            make_env(env_id)  # an unknown id or a continuous-action env gets make_env's own message
+            raise ConfigError(f"environment '{env_id}' has no benchmark settings; choose from {', '.join(BENCH_ENVS)}"
+                              " (or add it to mope.benchmark.BENCH_ENVS)")
+    for m in methods:
+        if m not in METHODS:
+            raise ConfigError(f"unknown method '{m}'{suggest(m, METHODS)}; choose from {', '.join(METHODS)}")
+    if seeds < 1:
+        raise ConfigError(f"--seeds {seeds} is out of range: must be >= 1")
+    if steps is not None and steps < 1:
+        raise ConfigError(f"--steps {steps} is out of range: must be >= 1 (the budget)")
+    if "envelope" in methods:
+        from mope.peers import require_morl_baselines
+
+        require_morl_baselines()
+
+
+def benchmark_jobs(envs: list[str], methods: list[str], seeds: int, quick: bool, steps: int | None) -> list[Job]:
+    """One job per (seed, environment, method), seed-major (a stopped benchmark has whole seeds to report)."""
+    from mope.peers import ENVELOPE_EXAMPLE
+
+    jobs = []
+    for seed in range(seeds):
+        for env_id in envs:
+            b = BENCH_ENVS[env_id]
+            total = steps or (b.quick_steps if quick else b.steps)
+            every = max(1, total // 3) if quick else min(b.eval_every, total)
+            name = f"{env_id}-{{m}}-s{seed}".replace("/", "_")
+            for m in methods:
+                if m == "envelope":
+                    jobs.append(Job(name.format(m=m), "envelope", {
+                        "env_id": env_id, "seed": seed, "total_steps": total, "eval_every": every,
+                        "eval_prefs": b.eval_prefs, "max_episode_steps": b.max_episode_steps, "gamma": 0.99,
+                        "overrides": ENVELOPE_EXAMPLE}))
+                    continue
+                cfg = Config.from_dict({**METHODS[m], "env_id": env_id, "seed": seed, "total_steps": total,
+                                        "eval_every": every, "eval_prefs": b.eval_prefs,
+                                        "max_episode_steps": b.max_episode_steps, "checkpoint_every": every})
+                jobs.append(Job(name.format(m=m), "train", cfg.to_dict()))
+    return jobs
+
+
+def _read_run(folder: Path) -> dict[str, Any]:
+    from mope.experiments import read_metrics
+
+    rows = read_metrics(folder)
+    summary = json.loads((folder / "summary.json").read_text())
+    return {"rows": rows, "final": rows[-1], "s_per_1k": summary.get("s_per_1k_steps", math.nan),
+            "peak_rss_mb": summary.get("peak_rss_mb", math.nan)}
+
+
+def _first(rows: list[dict[str, float]], ok: Any) -> tuple[float, float]:
+    """Step and wall seconds of the first evaluation where ``ok(row)``; NaN (never) otherwise."""
+    for r in rows:
+        if ok(r):
+            return float(r["step"]), float(r["wall_s"])
+    return math.nan, math.nan
+
+
+def summarise(out: Path, jobs: list[Job]) -> dict[str, dict[str, dict[str, Any]]]:
+    """Per environment, per method: the metrics' values over seeds, aggregated (mean, bootstrap CI)."""
+    from mope.report import aggregate
+
+    runs: dict[str, dict[str, list[dict[str, Any]]]] = {}
+    for job in jobs:
+        env_id = job.payload["env_id"]
+        method = job.name[len(env_id.replace("/", "_")) + 1:].rsplit("-s", 1)[0]
+        runs.setdefault(env_id, {}).setdefault(method, []).append(_read_run(out / job.name))
+    table: dict[str, dict[str, dict[str, Any]]] = {}
+    for env_id, by_method in runs.items():
+        known = any(np.isfinite(r["final"].get("cr", math.nan)) for rs in by_method.values() for r in rs)
+        best_eum = max(r["final"]["eum"] for rs in by_method.values() for r in rs)
+        table[env_id] = {}
+        for method, rs in by_method.items():
+            if known:
+                reach = [_first(r["rows"], lambda row: row["cr"] >= 1.0 - 1e-9) for r in rs]
+            else:  # 95 % of the way from 0 to the best EUM any method reached (EUM may be negative: use the gap)
+                target = best_eum - 0.05 * abs(best_eum)
+                reach = [_first(r["rows"], lambda row, t=target: row["eum"] >= t) for r in rs]
+            values = {k: [r["final"].get(k, math.nan) for r in rs]
+                      for k in ("cr", "eum", "eum_gap", "hv", "optimal_share", "timeout_share", "path_error")}
+            values.update(steps_to_target=[s for s, _ in reach], seconds_to_target=[w for _, w in reach],
+                          s_per_1k=[r["s_per_1k"] for r in rs], peak_rss_mb=[r["peak_rss_mb"] for r in rs])
+            table[env_id][method] = {"seeds": len(rs), "values": values,
+                                     "stats": {k: vars(aggregate(v)) for k, v in values.items()},
+                                     "reached": int(np.sum(np.isfinite(values["steps_to_target"])))}
+        budget = int(next(j.payload["total_steps"] for j in jobs if j.payload["env_id"] == env_id))
+        table[env_id]["_meta"] = {"known_front": known, "best_eum": best_eum, "steps": budget}
+    return table
+
+
+COLUMNS = (("cr", "CR", ".3f"), ("eum_gap", "EUM gap", ".2f"), ("eum", "EUM", ".2f"), ("hv", "HV", ".1f"),
+           ("optimal_share", "optimal share", ".3f"), ("timeout_share", "time-outs", ".3f"),
+           ("steps_to_target", "steps to target", ".0f"), ("s_per_1k", "train s / 1k steps", ".1f"),
+           ("peak_rss_mb", "peak MiB", ".0f"))
+
+
+def _cell(stats: dict[str, Any], fmt: str) -> str:
+    if not stats["n"]:
+        return "n/a"
+    return f"{stats['mean']:{fmt}} [{stats['ci_low']:{fmt}}, {stats['ci_high']:{fmt}}]"
+
+
+def render(summary: dict[str, dict[str, dict[str, Any]]], quick: bool, info: dict[str, Any]) -> str:
+    """The markdown report: one table per environment, ratios to Envelope where it ran."""
+    from mope.plots import markdown_table
+
+    lines = [f"# mope benchmark{' (--quick)' if quick else ''}", "",
+             f"Machine: {info['machine']}; {info['date']}; wall time {info['wall_s']:.0f} s. Command: "
+             f"`{info['command']}`.", "",
+             "Each cell: mean [bootstrap 95% CI] over seeds of the final evaluation. Target: CR = 1 where the front "
+             "is known, else 95 % of the best final EUM of any method; steps to it are the mean over the seeds "
+             "that reached it (count in the last column)."]
+    for env_id, by_method in summary.items():
+        meta = by_method["_meta"]
+        b = BENCH_ENVS[env_id]
+        cols = [c for c in COLUMNS if meta["known_front"] or c[0] not in ("cr", "optimal_share", "eum_gap")]
+        header = ["method", "seeds", *(c[1] for c in cols), "reached target"]
+        env_ratio = by_method.get("envelope")
+        rows = []
+        for method, s in by_method.items():
+            if method == "_meta":
+                continue
+            rows.append([method, str(s["seeds"]), *(_cell(s["stats"][k], f) for k, _, f in cols),
+                         f"{s['reached']}/{s['seeds']}"])
+        budget = f"{meta['steps']:,} steps per run" + ("" if meta["steps"] == b.steps else
+                                                        f" (the full benchmark's: {b.steps:,})")
+        lines += ["", f"## {env_id}", "", f"Budget: {budget}; the full budget's source: {b.source}.", "",
+                  markdown_table(header, rows)]
+        if env_ratio is not None:
+            ratios = []
+            for method, s in by_method.items():
+                if method in ("_meta", "envelope"):
+                    continue
+                cells = []
+                for key in ("s_per_1k", "peak_rss_mb", "seconds_to_target"):
+                    a, e = s["stats"][key]["mean"], env_ratio["stats"][key]["mean"]
+                    cells.append(f"{a / e:.2f}x" if e and math.isfinite(a) and math.isfinite(e) else "n/a")
+                ratios.append([method, *cells])
+            lines += ["", "Ratios to Envelope (same run, same machine):", "",
+                      markdown_table(["method", "train s / 1k steps", "peak memory", "seconds to target"], ratios)]
+        lines += ["", f"![{env_id}]({env_id.replace('/', '_')}.png)"]
+    return "\n".join(lines) + "\n"
+
+
+def plot_curves(out: Path, jobs: list[Job], dest: Path) -> list[Path]:
+    """One figure per environment: CR (or EUM), EUM and time-outs against steps, mean and 95 % band per method."""
+    from mope.plots import mean_ci, plt, save_figure
+
+    paths = []
+    by_env: dict[str, dict[str, list[list[dict[str, float]]]]] = {}
+    for job in jobs:
+        env_id = job.payload["env_id"]
+        method = job.name[len(env_id.replace("/", "_")) + 1:].rsplit("-s", 1)[0]
+        by_env.setdefault(env_id, {}).setdefault(method, []).append(_read_run(out / job.name)["rows"])
+    for env_id, by_method in by_env.items():
+        known = any(np.isfinite(rows[-1].get("cr", math.nan)) for rs in by_method.values() for rows in rs)
+        metrics = ["cr", "eum", "timeout_share"] if known else ["eum", "hv", "timeout_share"]
+        fig, axes = plt.subplots(1, 3, figsize=(13, 3.6))
+        for method, rs in by_method.items():
+            n = min(len(r) for r in rs)
+            steps = np.array([row["step"] for row in rs[0][:n]])
+            for ax, m in zip(axes, metrics, strict=True):
+                mean, lo, hi = mean_ci(np.array([[row[m] for row in r[:n]] for r in rs]))
+                ax.plot(steps, mean, lw=2, label=f"{method} (n={len(rs)})")
+                ax.fill_between(steps, lo, hi, alpha=0.2)
+        for ax, m in zip(axes, metrics, strict=True):
+            ax.set_title(f"{env_id}: {m}", fontsize=9)
+            ax.set_xlabel("environment steps")
+            ax.grid(alpha=0.3)
+        axes[0].legend(fontsize=7)
+        paths.append(save_figure(fig, dest / f"{env_id.replace('/', '_')}.png", dpi=110))
+    return paths
+
+
+def run_benchmark(out: str | Path, envs: list[str] | None = None, methods: list[str] | None = None,
+                  seeds: int = 5, quick: bool = False, steps: int | None = None, workers: int | None = None,
+                  backend: str = "local", address: str | None = None, report_dir: str | Path | None = None,
+                  progress: bool = True, command: str = "") -> dict[str, Any]:
+    """Train and evaluate the grid, then write ``benchmark.md``, ``benchmark.json`` and one PNG per environment.
+
+    Args:
+        out: The folder of the runs (one sub-folder per job); the report goes there too unless ``report_dir``.
+        envs: Environments (default: every one of :data:`BENCH_ENVS`).
+        methods: Methods (default: mope, eql, mope-paper, and envelope when morl-baselines is installed).
+        seeds: Seeds per (environment, method); ``quick`` forces 1.
+        quick: Small budgets (each environment's ``quick_steps``), one seed: a first look, and CI's test.
+        steps: Override every environment's budget.
+        workers: Jobs at once (default every core).
+        backend, address: The job runner's backend (``local`` or ``ray``) and Ray address.
+        report_dir: Where the table and figures go (default ``out``).
+        progress: Show the live line.
+        command: The command line, for the report.
+    """
+    envs = list(envs or BENCH_ENVS)
+    if methods is None:
+        methods = [m for m in DEFAULT_METHODS if m != "envelope"]
+        try:
+            import morl_baselines  # noqa: F401
+
+            methods.append("envelope")
+        except ImportError:
+            pass
+    seeds = 1 if quick else seeds
+    check_choices(envs, list(methods), seeds, steps)
+    jobs = benchmark_jobs(envs, list(methods), seeds, quick, steps)
+    out = Path(out)
+    dest = Path(report_dir) if report_dir is not None else out
+    with FolderLock(out, what="benchmark folder"):
+        t0 = time.perf_counter()
+        records = run_jobs(jobs, out, backend, workers, address, progress, desc="benchmark", fresh_processes=True)
+        failed = [r for r in records.values() if r["status"] == "failed"]
+        if failed:
+            raise MopeError(f"{len(failed)} of {len(jobs)} runs failed, the first: {failed[0]['name']} "
+                            f"({failed[0]['error']}); see {out / failed[0]['name'] / 'error.txt'}")
+        wall = time.perf_counter() - t0
+        summary = summarise(out, jobs)
+        dest.mkdir(parents=True, exist_ok=True)
+        info = _machine(wall, command)
+        text = render(summary, quick, info)
+        (dest / "benchmark.md").write_text(text)
+        (dest / "benchmark.json").write_text(json.dumps({"info": info, "summary": summary}, indent=1, default=_json))
+        figures = plot_curves(out, jobs, dest)
+    return {"summary": summary, "table": text, "out": dest, "wall_s": wall, "figures": figures}
+
+
+def _machine(wall_s: float, command: str) -> dict[str, Any]:
+    import datetime
+    import os
+    import platform
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as f:
+            cpu = next((ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name")), cpu)
+    except OSError:
+        pass
+    return {"machine": f"{cpu}, {os.cpu_count()} CPUs, Python {platform.python_version()}",
+            "date": datetime.date.today().isoformat(), "wall_s": wall_s, "command": command}
+
+
+def _json(x: Any) -> Any:
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    return str(x)
+
+
+__all__ = ["BENCH_ENVS", "METHODS", "EnvBench", "benchmark_jobs", "run_benchmark"]

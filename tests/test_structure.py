@@ -264,3 +264,13 @@ def test_benchmark_quick_runs_and_keeps_finished_runs(tmp_path: Path) -> None:
     stamp = (out / "deep-sea-treasure-v0-mope-s0" / "summary.json").stat().st_mtime
     again = cli("benchmark", "--quick", "--out", str(out), "--no-progress")  # a re-run keeps the finished runs
     assert again.returncode == 0 and (out / "deep-sea-treasure-v0-mope-s0" / "summary.json").stat().st_mtime == stamp
+
+
+def test_no_class_over_250_lines_and_no_function_over_60_in_src() -> None:
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("check_sizes", Path(__file__).parents[1] / "scripts" /
+                                                  "check_sizes.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    assert module.oversized(Path(__file__).parents[1] / "src", 250, 60) == []

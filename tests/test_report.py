@@ -166,3 +166,14 @@ def test_a_sweep_with_arms_is_grouped_by_arm(tmp_path: Path) -> None:
     res = report(tmp_path, plots=False)
     assert [g.label for g in res.groups] == ["default", "paper"]
     assert res.groups[1].stats["cr"].mean == pytest.approx(0.3)
+
+
+def test_coverage_over_time_counts_first_cr1_and_the_drop(tmp_path: Path) -> None:
+    write_sweep(tmp_path)
+    res = report(tmp_path, plots=False)
+    text = (tmp_path / "report" / "report.md").read_text()
+    # the hand-made curves rise linearly to the final CR: only the eql seed with final CR 1.0 reaches it, at step 300
+    assert "| eql | 1/4 | never | never, never, never, 300 | 0.000 [0.000, 0.000] |" in text
+    doc = json.loads((tmp_path / "report" / "report.json").read_text())
+    assert doc["groups"][0]["coverage"]["first_cr1"] == [None, None, None, 300]
+    assert res.groups[0].label == "eql"

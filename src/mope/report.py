@@ -316,6 +316,36 @@ def render_table(groups: Sequence[Group], metrics: Sequence[str]) -> str:
     return markdown_table(header, rows)
 
 
+def coverage_over_time(groups: Sequence[Group]) -> dict[str, dict[str, Any]]:
+    """Per group: the first step with CR = 1 of each run (None: never), its median (never = infinite), and how far
+    each run's final CR is below the best it reached (learning that collapses shows here)."""
+    out = {}
+    for g in groups:
+        firsts = [next((r["step"] for r in run.rows if r.get("cr", 0.0) >= 1.0 - 1e-9), None) for run in g.runs]
+        ranked = sorted(math.inf if f is None else f for f in firsts)
+        drops = [max(r.get("cr", math.nan) for r in run.rows) - run.final.get("cr", math.nan) for run in g.runs]
+        out[g.label] = {"first_cr1": firsts, "median_first_cr1": float(np.median(ranked)),
+                        "reached": sum(f is not None for f in firsts), "cr_drop": aggregate(drops)}
+    return out
+
+
+def render_coverage(groups: Sequence[Group], cov: dict[str, dict[str, Any]]) -> str:
+    """Markdown: seeds that reached CR = 1, the median first step, and the drop from the best CR to the final one."""
+    from mope.plots import markdown_table
+
+    rows = []
+    for g in groups:
+        c = cov[g.label]
+        med = c["median_first_cr1"]
+        first = "never" if math.isinf(med) else f"{med:.0f}"
+        d = c["cr_drop"]
+        rows.append([g.label, f"{c['reached']}/{len(g.runs)}", first,
+                     ", ".join("never" if f is None else f"{f:.0f}" for f in c["first_cr1"]),
+                     "n/a" if d.n == 0 else f"{d.mean:.3f} [{d.ci_low:.3f}, {d.ci_high:.3f}]"])
+    return markdown_table(["group", "seeds at CR = 1", "median first step at CR = 1 (never = infinite)",
+                           "first step at CR = 1, per seed", "best CR - final CR"], rows)
+
+
 def plot_learning_curves(groups: Sequence[Group], metrics: Sequence[str], path: str | Path, n_boot: int = 2000,
                          seed: int = 0) -> Path:
     """One panel per metric: each group's mean over seeds against steps, with a bootstrap 95% band."""
@@ -481,12 +511,21 @@ def _write_report(root: Path, out: Path, runs: Sequence[Run], groups: Sequence[G
             files["fronts.png"] = fronts
     md = [f"# Report: {root}", "", f"{len(runs)} runs in {len(groups)} groups. Each cell: mean ± sample std "
           f"[bootstrap 95% CI of the mean, {n_boot} resamples] of the final evaluation over seeds.", "", table]
+    coverage = coverage_over_time(groups) if "cr" in shown else {}
+    if coverage:
+        md += ["", "Coverage over the run (evaluations every `eval_every` steps):", "",
+               render_coverage(groups, coverage)]
     if notes:
         md += ["", *[f"* {n}" for n in notes]]
     files["report.md"].write_text("\n".join(md) + "\n")
     doc = {"runs_dir": str(root), "n_boot": n_boot, "seed": seed, "metrics": shown, "notes": notes,
            "groups": [{"label": g.label, "key": g.key, "runs": [str(r.path.relative_to(root)) for r in g.runs],
-                       "stats": {m: {k: _nan_none(v) for k, v in vars(g.stats[m]).items()} for m in shown}}
+                       "stats": {m: {k: _nan_none(v) for k, v in vars(g.stats[m]).items()} for m in shown},
+                       **({"coverage": {"first_cr1": coverage[g.label]["first_cr1"],
+                                        "median_first_cr1": _nan_none(coverage[g.label]["median_first_cr1"]),
+                                        "cr_drop": {k: _nan_none(v) for k, v in
+                                                    vars(coverage[g.label]["cr_drop"]).items()}}}
+                          if coverage else {})}
                       for g in groups]}
     files["report.json"].write_text(json.dumps(doc, indent=2) + "\n")
     return ReportResult(out, groups, shown, table, notes, files)

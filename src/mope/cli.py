@@ -275,6 +275,9 @@ def reproduce_dst_cmd(
     steps: Annotated[int, typer.Option(help="Environment steps per run.")] = 20_000,
     eval_every: Annotated[int, typer.Option(help="Evaluate CR every N steps.")] = 1000,
     algos: Annotated[str, typer.Option(help="Comma-separated variants.")] = "eql,ee,pe,mope",
+    env: Annotated[str, typer.Option(help="A Deep-Sea-Treasure map: deep-sea-treasure-v0 (MO-Gymnasium's), "
+                                          "mope/deep-sea-treasure-seabed-v0 (the EQL authors' seabed rule), ...")
+                   ] = "deep-sea-treasure-v0",
     workers: Annotated[int, typer.Option(help="Parallel training processes.")] = 2,
     set_: Annotated[list[str] | None, typer.Option("--set", help="Config override for every run: KEY=VALUE.")] = None,
     device: Annotated[str | None, typer.Option(help="cpu, cuda or auto.")] = None,
@@ -285,7 +288,7 @@ def reproduce_dst_cmd(
 
     try:
         res = reproduce_dst(out, seeds=seeds, steps=steps, eval_every=eval_every,
-                            algos=tuple(a.strip() for a in algos.split(",") if a.strip()), workers=workers,
+                            algos=tuple(a.strip() for a in algos.split(",") if a.strip()), workers=workers, env_id=env,
                             progress=progress, **{**_parse_sets(set_ or []), **({"device": device} if device else {})})
     except MopeError as exc:
         _fail(str(exc))

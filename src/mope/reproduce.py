@@ -31,7 +31,7 @@ from mope.locks import FolderLock
 
 DST = "deep-sea-treasure-v0"
 CURVES = ("cr", "optimal_share", "timeout_share")
-FINAL_KEYS = ("cr", "hv", "eum", "eum_optimal", "eum_gap", "optimal_share", "timeout_share")
+FINAL_KEYS = ("cr", "hv", "eum", "eum_optimal", "eum_gap", "optimal_share", "timeout_share", "path_error")
 
 
 
@@ -92,9 +92,21 @@ def dst_jobs(seeds: int, steps: int, eval_every: int, algos: Sequence[str], env_
         check_algo(a)
     if seeds < 1 or steps < 1:
         raise ConfigError(f"seeds={seeds} and steps={steps} must both be >= 1")
+    from mope.envs import make_env
+
+    if not hasattr(make_env(env_id).unwrapped, "sea_map"):
+        raise ConfigError(f"environment '{env_id}' is not a Deep-Sea-Treasure map; mope reproduce dst runs on "
+                          "deep-sea-treasure-v0, its -concave/-mirrored maps or mope/deep-sea-treasure-seabed-v0")
     return [Job(run_name(a, s), "train", Config.for_algo(a, env_id=env_id, seed=s, total_steps=steps,
                                                          eval_every=eval_every, **overrides).to_dict())
             for s in range(seeds) for a in algos]
+
+
+def _median_never_infinite(first_steps: np.ndarray) -> float | None:
+    """Median first step at CR = 1 over seeds, a seed that never got there counting as infinite; None if that
+    median is infinite (more than half the seeds never covered)."""
+    med = float(np.median(np.where(np.isnan(first_steps), np.inf, first_steps)))
+    return med if np.isfinite(med) else None
 
 
 def run_name(algo: str, seed: int) -> str:
@@ -116,7 +128,7 @@ def summarise_variant(out: Path, algo: str, seeds: int, n_prefs: int) -> tuple[d
     t_full = np.array([steps_to_full_coverage(rows) for rows in metric_rows])
     result = {
         **{k: {"mean": float(v.mean()), "std": float(v.std()), "values": v.tolist()} for k, v in fin.items()},
-        "steps_to_cr1": {"median": float(np.nanmedian(t_full)) if np.any(~np.isnan(t_full)) else None,
+        "steps_to_cr1": {"median": _median_never_infinite(t_full),
                          "reached": int(np.sum(~np.isnan(t_full))), "seeds": seeds,
                          "values": [None if np.isnan(t) else float(t) for t in t_full]},
         "best_cr": [float(max(r["cr"] for r in rows)) for rows in metric_rows],
@@ -160,7 +172,7 @@ def dst_table(algos: Sequence[str], results: dict[str, Any]) -> str:
         return f"{d['mean']:{fmt}} ± {d['std']:{fmt}}"
 
     header = ["variant", "final CR", "steps to CR = 1 (median; seeds)", "HV", "EUM (optimum)", "optimal share",
-              "time-outs", "routes per treasure", "I(S; C) nats", "s / 1k steps"]
+              "time-outs", "path error", "routes per treasure", "I(S; C) nats", "s / 1k steps"]
     rows = []
     for a in algos:
         r = results[a]
@@ -168,7 +180,8 @@ def dst_table(algos: Sequence[str], results: dict[str, Any]) -> str:
         rows.append([a, pm(r["cr"]), f"{t['median']:.0f} ({t['reached']}/{t['seeds']})" if t["median"] else
                      f"never (0/{t['seeds']})", pm(r["hv"], ".1f"),
                      f"{pm(r['eum'], '.2f')} ({r['eum_optimal']['mean']:.2f})", pm(r["optimal_share"]),
-                     pm(r["timeout_share"]), f"{r['paths_per_solution']:.2f}", f"{r['mi_state_pref']:.3f}",
+                     pm(r["timeout_share"]), pm(r["path_error"]), f"{r['paths_per_solution']:.2f}",
+                     f"{r['mi_state_pref']:.3f}",
                      f"{r['s_per_1k_steps']:.1f}"])
     return markdown_table(header, rows)
 

@@ -33,6 +33,7 @@ def _metrics(run: Path) -> list[dict[str, str]]:
         rows = list(csv.DictReader(f))
     for r in rows:
         r.pop("wall_s")
+        r.pop("train_s", None)
     return rows
 
 

@@ -18,7 +18,8 @@ One update (:meth:`MoPE.update`), top to bottom:
 5. new priorities: the preference-interval TD error (eq. 5), plus, with EE, alpha times the discriminator's
    mutual-information term (eq. 6-7); then one discriminator step.
 
-Housekeeping (:meth:`MoPE.end_step`): copy the target network every ``target_update_freq`` steps.
+Housekeeping (:meth:`MoPE.end_step`): the target network (Polyak averaging with ``target_tau``, by default, or a
+hard copy every ``target_update_freq`` steps) and the learning-rate schedule.
 The loop that strings these together, with evaluation, progress, checkpoints and logs as callbacks, is
 :func:`mope.runner.train`.
 """
@@ -160,8 +161,10 @@ class MoPE(BaseAgent):
         self.buffer = ReplayBuffer(cfg.buffer_size, self.obs_shape, self.m, cfg.per, obs_dtype)
         self.global_step = 0
         self.episodes = 0
-        #: Training wall seconds before the current ``train`` call (carried across resumes).
+        #: Training wall seconds before the current ``train`` call (carried across resumes), evaluations included.
         self.wall_s = 0.0
+        #: Of which evaluating (carried across resumes too).
+        self.eval_seconds = 0.0
         # The episode in progress (kept across ``train`` calls and in resumable checkpoints): its reset seed,
         # preference, current observation and the actions taken so far (replayed on load to restore the env).
         self._obs: Any = None

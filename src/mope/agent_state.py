@@ -92,6 +92,7 @@ class AgentState:
             "rng": a.rng.bit_generator.state,
             "torch_rng": torch.get_rng_state(),
             "wall_s": a.wall_s,
+            "eval_seconds": a.eval_seconds,
         }
         if a.discriminator is not None and a.disc_optimizer is not None:
             state["discriminator"] = a.discriminator.state_dict()
@@ -161,6 +162,7 @@ class AgentState:
         a.rng.bit_generator.state = data["rng"]
         torch.set_rng_state(data["torch_rng"])
         a.wall_s = float(data.get("wall_s", 0.0))
+        a.eval_seconds = float(data.get("eval_seconds", 0.0))
         if "buffer" in data:
             a.buffer.load_state_dict({k: v.numpy() if isinstance(v, torch.Tensor) else v
                                       for k, v in data["buffer"].items()})

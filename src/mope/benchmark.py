@@ -125,15 +125,16 @@ def _read_run(folder: Path) -> dict[str, Any]:
 
     rows = read_metrics(folder)
     summary = json.loads((folder / "summary.json").read_text())
-    return {"rows": rows, "final": rows[-1], "s_per_1k": summary.get("s_per_1k_steps", math.nan),
+    s_per_1k = summary.get("train_s_per_1k_steps", summary.get("s_per_1k_steps", math.nan))  # evaluations excluded
+    return {"rows": rows, "final": rows[-1], "s_per_1k": s_per_1k,
             "peak_rss_mb": summary.get("peak_rss_mb", math.nan)}
 
 
 def _first(rows: list[dict[str, float]], ok: Any) -> tuple[float, float]:
-    """Step and wall seconds of the first evaluation where ``ok(row)``; NaN (never) otherwise."""
+    """Step and training seconds (evaluations excluded) of the first evaluation where ``ok(row)``; NaN otherwise."""
     for r in rows:
         if ok(r):
-            return float(r["step"]), float(r["wall_s"])
+            return float(r["step"]), float(r.get("train_s", r["wall_s"]))
     return math.nan, math.nan
 
 
@@ -169,6 +170,7 @@ def summarise(out: Path, jobs: list[Job]) -> dict[str, dict[str, dict[str, Any]]
     return table
 
 
+#: Table columns: (key, label, format). Seconds are training only (evaluations excluded), for every method.
 COLUMNS = (("cr", "CR", ".3f"), ("eum_gap", "EUM gap", ".2f"), ("eum", "EUM", ".2f"), ("hv", "HV", ".1f"),
            ("optimal_share", "optimal share", ".3f"), ("timeout_share", "time-outs", ".3f"),
            ("steps_to_target", "steps to target", ".0f"), ("s_per_1k", "train s / 1k steps", ".1f"),

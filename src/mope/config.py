@@ -5,8 +5,9 @@ its flags, ``MoPE(env, **overrides)`` builds one from keyword arguments, and eve
 checkpoint stores ``Config.to_dict()``; :meth:`Config.from_dict` reads it back. Values are validated when
 the object is built, with one-line errors that name the bad value.
 
-Where the paper is silent, the default is what Yang et al. (2019) or morl-baselines use on
-Deep-Sea-Treasure, and the field's docstring says so (see ``docs/design.md``).
+The defaults are the learning study's recipe (docs/design.md, "The learner"; docs/results/learning-study); the
+``paper`` preset holds the paper's settings, and where the paper is silent, what Yang et al. (2019) or
+morl-baselines use on Deep-Sea-Treasure.
 """
 
 from __future__ import annotations

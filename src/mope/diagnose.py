@@ -26,7 +26,7 @@ from typing import Protocol
 import gymnasium as gym
 import numpy as np
 
-from mope.errors import EnvironmentError_
+from mope.errors import EnvironmentError_, MopeError
 from mope.preferences import equally_spaced, validate_preference
 
 #: An action is optimal when its exact value is within this of V*(s, w).
@@ -276,6 +276,8 @@ def diagnose(agent: QFunction, env: gym.Env, gamma: float = 0.99, prefs: np.ndar
     Returns:
         The metrics, plus ``n_prefs``.
     """
+    if not 0 < gamma < 1:
+        raise MopeError(f"gamma={gamma} is out of range for the ground truth: value iteration needs 0 < gamma < 1")
     model = tabular_model(env)
     m = model.reward.shape[2]
     w = equally_spaced(m, prefs) if isinstance(prefs, int) else validate_preference(prefs, m)

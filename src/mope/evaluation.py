@@ -148,6 +148,8 @@ class GroundTruthCheck:
         from mope.diagnose import tabular_model, value_iteration
         from mope.errors import EnvironmentError_
 
+        if gamma >= 1:  # value iteration needs a discount below 1 (undiscounted loops have no finite value)
+            return None
         try:
             model = tabular_model(env)
         except EnvironmentError_:

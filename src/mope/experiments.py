@@ -5,7 +5,8 @@ A run folder written by :func:`train_run` (and ``mope train``) holds::
     config.json          the resolved Config (every field, plus the derived algo)
     metrics.csv          one row per evaluation: step, wall_s, cr, precision, recall, hv, eum, eum_optimal,
                          eum_gap, optimal_share, cardinality, timeout_share, path_error, state_error,
-                         overestimation (against the exact Q* where the dynamics are known, else NaN), loss, epsilon
+                         overestimation (against the exact Q* where the dynamics are known, else NaN), loss, epsilon,
+                         train_s (wall_s without the evaluations)
     train_stats.csv      every log_every steps: the mean of each update statistic over those steps (loss,
                          loss_a, loss_b, td_abs, q_mean, q_max, mi_bonus, disc_loss) and epsilon
     solutions.csv        the final evaluation: preference, discounted and undiscounted return per preference
@@ -47,7 +48,7 @@ from mope.metrics import EVALUATE_KEYS
 from mope.preferences import validate_preference
 from mope.runner import Callback, EvalCallback, IntervalStats, ProgressBar, StopWhen, train
 
-METRIC_COLUMNS = ["step", "wall_s", *EVALUATE_KEYS, "timeout_share", *TRUTH_KEYS, "loss", "epsilon"]
+METRIC_COLUMNS = ["step", "wall_s", *EVALUATE_KEYS, "timeout_share", *TRUTH_KEYS, "loss", "epsilon", "train_s"]
 #: Interval averages of the update statistics (``IntervalStats``), every ``log_every`` steps.
 TRAIN_STATS = "train_stats.csv"
 STATS_COLUMNS = ["step", "updates", "epsilon", "loss", "loss_a", "loss_b", "td_abs", "q_mean", "q_max", "mi_bonus",
@@ -144,9 +145,11 @@ def _environment_info() -> dict[str, Any]:
 
 
 def _same_run(saved: Config, wanted: Config) -> list[str]:
-    """Fields (other than device and thread count) in which two configs differ."""
+    """Fields that change results (not device, threads or log interval) in which two configs differ."""
+    from mope.jobs import NON_RESULT_FIELDS
+
     a, b = saved.to_dict(), wanted.to_dict()
-    return [k for k in a if k not in ("device", "torch_threads") and a[k] != b.get(k)]
+    return [k for k in a if k not in NON_RESULT_FIELDS and a[k] != b.get(k)]
 
 
 def _finished_result(out: Path) -> RunResult:
@@ -295,22 +298,27 @@ def _train_logged(agent: MoPE, config: Config, out: Path, kept: list[dict], kept
         callbacks.insert(0, ProgressBar(evaluating))
     remaining = config.total_steps - agent.global_step
     try:
-        if remaining > 0:
-            train(agent, remaining, callbacks)
-        else:  # resumed at the last step: evaluate once more for the final solutions (deterministic)
-            _, agent.last_solutions = evaluator.evaluate(agent)
-    except TrainingDivergedError as exc:
-        last = out / "checkpoints" / RESUME_CHECKPOINT
-        where = f"the last good checkpoint is '{last}'" if last.is_file() else "no checkpoint was written before it"
-        raise TrainingDivergedError(f"{exc}; {where}") from None
+        try:
+            if remaining > 0:
+                train(agent, remaining, callbacks)
+            elif kept and kept[-1]["step"] == agent.global_step:  # resumed at the last step, evaluated already:
+                _, agent.last_solutions = evaluator.evaluate(agent)  # once more for the final solutions
+            else:  # stopped on the last step before its evaluation: make (and log) it now
+                evaluating.evaluate(agent)
+        except TrainingDivergedError as exc:
+            last = out / "checkpoints" / RESUME_CHECKPOINT
+            where = f"the last good checkpoint is '{last}'" if last.is_file() else \
+                "no checkpoint was written before it"
+            raise TrainingDivergedError(f"{exc}; {where}") from None
+        finally:
+            logs.close()
+            eval_env.close()
+        if received:  # the handlers stay in place until the state is saved: a second signal cannot cut the save
+            agent.save(out / "checkpoints" / RESUME_CHECKPOINT, include_buffer=True)
+            raise KeyboardInterrupt(f"stopped by signal {received[0]} at step {agent.global_step}")
     finally:
         for sig, old_handler in handlers.items():
             signal.signal(sig, old_handler)
-        logs.close()
-        eval_env.close()
-    if received:
-        agent.save(out / "checkpoints" / RESUME_CHECKPOINT, include_buffer=True)
-        raise KeyboardInterrupt(f"stopped by signal {received[0]} at step {agent.global_step}")
     return evaluating.records
 
 
@@ -321,7 +329,9 @@ def _finish_run(agent: MoPE, config: Config, out: Path, all_records: list[dict],
     if agent.last_solutions is not None:
         write_solutions(out / "solutions.csv", agent.last_solutions)  # the final evaluation's solutions
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # KiB on Linux: this process's peak so far
+    eval_s = agent.eval_seconds
     summary = {"final": final, "wall_s": agent.wall_s, "s_per_1k_steps": 1000 * agent.wall_s / config.total_steps,
+               "eval_s": eval_s, "train_s_per_1k_steps": 1000 * (agent.wall_s - eval_s) / config.total_steps,
                "peak_rss_mb": peak_mb,
                "algo": config.algo, "env_id": config.env_id, "seed": config.seed, "resumed": status == "resumable",
                "versions": _environment_info()}

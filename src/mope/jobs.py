@@ -110,11 +110,12 @@ def _envelope_job(payload: dict[str, Any], out: Path) -> dict[str, Any]:
             runner.train(min(payload["eval_every"], cfg.total_steps - runner.global_step))
             train_s += time.perf_counter() - t0
             res, _ = evaluator.evaluate(runner.policy())
-            rows.append({"step": runner.global_step, "wall_s": train_s, **res})
+            rows.append({"step": runner.global_step, "wall_s": train_s, "train_s": train_s, **res})
             writer.writerow({k: rows[-1].get(k, float("nan")) for k in METRIC_COLUMNS})
             f.flush()
     final = rows[-1]
     summary = {"final": final, "wall_s": train_s, "s_per_1k_steps": 1000 * train_s / cfg.total_steps,
+               "train_s_per_1k_steps": 1000 * train_s / cfg.total_steps,
                "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "method": "envelope"}
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
     return final
@@ -137,14 +138,18 @@ def check_job_folders(jobs: list[Job], out: Path) -> None:
     from mope.config import Config
 
     for job in jobs:
-        path = out / job.name / "config.json"
-        if job.kind != "train" or not path.is_file():
+        name = {"train": "config.json", "envelope": "peer.json"}.get(job.kind)
+        path = out / job.name / (name or "")
+        if name is None or not path.is_file():
             continue
         try:
             saved = json.loads(path.read_text())
-        except (OSError, json.JSONDecodeError):
+            if job.kind == "train":
+                saved, wanted = Config.from_dict(saved).to_dict(), Config.from_dict(job.payload).to_dict()
+            else:
+                wanted = json.loads(json.dumps({"method": "envelope", **job.payload}))
+        except (OSError, json.JSONDecodeError, MopeError):
             continue  # an unreadable config belongs to a run that never got going; it is started afresh
-        wanted = Config.from_dict(job.payload).to_dict()
         differ = [k for k in wanted if k not in NON_RESULT_FIELDS and saved.get(k) != wanted[k]]
         if differ:
             what = ", ".join(f"{k} ({saved.get(k)!r} there, {wanted[k]!r} now)" for k in differ[:4])
@@ -334,7 +339,11 @@ def _ray_backend(jobs: list[tuple[str, str, dict[str, Any], str]], out: Path, wo
                 pending.append(remote.remote(*queue.pop(0)))
             ready, pending = ray.wait(pending, num_returns=1, timeout=1.0)
             for ref in ready:
-                rec = ray.get(ref)
+                try:
+                    rec = ray.get(ref)
+                except Exception as exc:  # noqa: BLE001 - a worker crashed or was killed: not the job's error
+                    raise JobError(f"a Ray task died ({type(exc).__name__}: {str(exc).splitlines()[0][:200]}); "
+                                   "run the same command again to resume the unfinished jobs") from None
                 unpack_job(rec, out)
                 on_done(rec)
             on_running(len(pending))

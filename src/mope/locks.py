@@ -2,7 +2,9 @@
 
 A lock is a file ``.mope.lock`` in the folder holding the writer's PID and host. It is created atomically
 (``O_EXCL``); a second writer finds it and is refused with an error naming the holder. A lock whose process is
-gone (a killed run) is stale and is taken over.
+gone (a killed run on this host), or that still holds no PID after 10 s (its writer died while creating it), is
+stale and is taken over. A lock held from another host is never taken over: delete it by hand once that run
+is known to be dead.
 """
 
 from __future__ import annotations
@@ -11,12 +13,15 @@ import contextlib
 import json
 import os
 import socket
+import time
 from pathlib import Path
 from types import TracebackType
 
 from mope.errors import MopeError
 
 LOCK_NAME = ".mope.lock"
+#: A lock file that still holds no readable PID after this many seconds was left by a writer killed at birth.
+UNREADABLE_STALE_S = 10.0
 
 
 class FolderLockedError(MopeError):
@@ -54,6 +59,12 @@ class FolderLock:
         except (OSError, ValueError):
             return None
 
+    def _age(self) -> float:
+        try:
+            return time.time() - self.path.stat().st_mtime
+        except OSError:
+            return 0.0
+
     def acquire(self) -> None:
         key = str(self.path.resolve()) if self.folder.exists() else str(self.path.absolute())
         if FolderLock._held.get(key):
@@ -75,7 +86,11 @@ class FolderLock:
                     with contextlib.suppress(FileNotFoundError):  # stale: its process is gone
                         self.path.unlink()
                     continue
-                if holder is None:  # being written right now, or unreadable: treat as held
+                if holder is None and self._age() > UNREADABLE_STALE_S:  # its writer died before writing it
+                    with contextlib.suppress(FileNotFoundError):
+                        self.path.unlink()
+                    continue
+                if holder is None:  # being written right now: treat as held
                     holder = {"pid": "?", "host": "?"}
                 raise FolderLockedError(
                     f"{self.what} '{self.folder}' is in use by process {holder.get('pid')} on {holder.get('host')}; "

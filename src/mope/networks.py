@@ -1,12 +1,15 @@
-"""Networks: the preference-conditioned multi-head Q-network and the preference discriminator.
+"""Networks: the Q-networks (the paper's conditioned one and mope's convex head) and the preference discriminator.
 
 * :class:`QNetwork` -- Q(s, a, omega), paper sec. 4: the state and the preference are concatenated and go
-  through four fully connected hidden layers {64, 128, 128, 64}; the output has one head per objective, i.e.
-  ``|A| x m`` values (Abels et al. 2019's conditioned network).
+  through fully connected hidden layers (the paper: {64, 128, 128, 64}); the output has one head per objective,
+  i.e. ``|A| x m`` values (Abels et al. 2019's conditioned network). The ``paper`` preset's network.
+* :class:`ConvexQNetwork` -- mope's default (``q_head: convex``): C return vectors per action from the state
+  alone; Q(s, a, omega) is the one omega prefers (see its docstring and docs/design.md).
 * :class:`Discriminator` -- q_phi(omega | s), paper eq. 6: three fully connected layers that output a
   categorical distribution over the N_I preference cells of preference exploration (see docs/design.md).
 * :class:`ObsEncoder` -- turns a Gymnasium observation into a flat float vector: a bounded ``Box`` is scaled
-  to [0, 1], an unbounded one is flattened, a ``Discrete`` one is one-hot encoded.
+  to [0, 1] or, for a small integer ``Box`` (``auto``, the default, or ``onehot``), each coordinate is one-hot
+  encoded; an unbounded ``Box`` is flattened, a ``Discrete`` one is one-hot encoded.
 """
 
 from __future__ import annotations

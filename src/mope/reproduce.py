@@ -178,7 +178,7 @@ def dst_table(algos: Sequence[str], results: dict[str, Any]) -> str:
         r = results[a]
         t = r["steps_to_cr1"]
         rows.append([a, pm(r["cr"]), f"{t['median']:.0f} ({t['reached']}/{t['seeds']})" if t["median"] else
-                     f"never (0/{t['seeds']})", pm(r["hv"], ".1f"),
+                     f"never ({t['reached']}/{t['seeds']})", pm(r["hv"], ".1f"),
                      f"{pm(r['eum'], '.2f')} ({r['eum_optimal']['mean']:.2f})", pm(r["optimal_share"]),
                      pm(r["timeout_share"]), pm(r["path_error"]), f"{r['paths_per_solution']:.2f}",
                      f"{r['mi_state_pref']:.3f}",

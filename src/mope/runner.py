@@ -120,10 +120,17 @@ class EvalCallback(Callback):
         self.every = every
         self.on_record = on_record
         self.records: list[dict[str, float]] = []
+        #: Seconds spent evaluating (the training wall time includes them).
+        self.seconds = 0.0
 
     def evaluate(self, agent: MoPE) -> dict[str, float]:
+        t0 = time.perf_counter()
+        train_s = wall_seconds(agent) - agent.eval_seconds  # training only, up to this evaluation
         res, agent.last_solutions = self.evaluator.evaluate(agent)
-        rec = {"step": agent.global_step, "wall_s": wall_seconds(agent), **res}
+        dt = time.perf_counter() - t0
+        self.seconds += dt
+        agent.eval_seconds += dt
+        rec = {"step": agent.global_step, "wall_s": wall_seconds(agent), "train_s": train_s, **res}
         self.records.append(rec)
         if self.on_record is not None:
             self.on_record(agent, rec)

@@ -23,12 +23,18 @@ class VideoError(MopeError):
     """A rollout cannot be recorded (no ``rgb_array`` rendering, a bad path, an unusable policy)."""
 
 
-def _action_fn(policy: Any, pref: np.ndarray | None) -> Callable[[np.ndarray], Any]:
+def _action_fn(policy: Any, pref: np.ndarray | None, space: Any = None) -> Callable[[np.ndarray], Any]:
     if hasattr(policy, "act") and hasattr(policy, "greedy_actions"):
         if pref is None:
             raise VideoError("a preference is needed to play a preference-conditioned agent (e.g. --pref 0.5,0.5)")
         return lambda obs: policy.act(obs, pref)
     if hasattr(policy, "predict"):
+        own = getattr(policy, "action_space", None)
+        if isinstance(space, gym.spaces.Box) and isinstance(own, gym.spaces.Box) and own.shape == space.shape \
+                and not (np.allclose(own.low, space.low) and np.allclose(own.high, space.high)):
+            from mope.baselines import rescale_to_box  # a model trained through RescaleAction (mope's PPO)
+
+            return lambda obs: rescale_to_box(policy.predict(obs, deterministic=True)[0], space)
         return lambda obs: policy.predict(obs, deterministic=True)[0]
     if callable(policy):
         return policy
@@ -62,7 +68,7 @@ def record_video(policy: Any, env_id: str, pref: Any, path: str | Path, seed: in
     env = _rendering_env(env_id, env_kwargs)
     m = int(env.unwrapped.reward_space.shape[0])
     w = validate_preference(pref, m) if pref is not None else None
-    act = _action_fn(policy, w)
+    act = _action_fn(policy, w, env.action_space)
     limit = max_steps or (env.spec.max_episode_steps if env.spec else None) or 1000
     try:
         obs, info = env.reset(seed=seed)

@@ -43,12 +43,15 @@ class Solutions:
     #: ``(n, T + 1, *obs_shape)`` visited observations (after the end, the last one repeats); only with
     #: ``record_obs=True``
     observations: np.ndarray | None = None
+    #: ``(n,)`` each episode's outcome where the environment reports one (the confrontation game), else None
+    outcomes: np.ndarray | None = None
 
     def subset(self, idx: slice | np.ndarray) -> Solutions:
         """The rows ``idx`` of every field."""
         obs = None if self.observations is None else self.observations[idx]
+        out = None if self.outcomes is None else self.outcomes[idx]
         return Solutions(self.prefs[idx], self.returns[idx], self.discounted[idx], self.lengths[idx],
-                         self.terminated[idx], obs)
+                         self.terminated[idx], obs, out)
 
 
 def solutions(agent: GreedyPolicy, env: gym.Env, prefs: np.ndarray, gamma: float,
@@ -109,7 +112,8 @@ def solutions(agent: GreedyPolicy, env: gym.Env, prefs: np.ndarray, gamma: float
         if running.size == 0:
             break
     observations = np.stack(history, axis=1) if history is not None else None
-    return Solutions(prefs, returns, discounted, lengths, terminated, observations)
+    outcomes = np.asarray(batch.outcomes()) if hasattr(batch, "outcomes") else None
+    return Solutions(prefs, returns, discounted, lengths, terminated, observations, outcomes)
 
 
 def _close_loops(batch: Any, running: np.ndarray, visited: np.ndarray, returns: np.ndarray, discounted: np.ndarray,
@@ -135,6 +139,15 @@ def _close_loops(batch: Any, running: np.ndarray, visited: np.ndarray, returns: 
 
 #: Ground-truth columns of an evaluation (NaN where the environment's dynamics are not known).
 TRUTH_KEYS = ("path_error", "state_error", "overestimation")
+#: Outcome columns of an evaluation (the confrontation game; NaN elsewhere): red wins, blue wins, red out.
+OUTCOME_KEYS = {"win_share": "red_win", "loss_share": "blue_win", "out_share": "red_out"}
+
+
+def outcome_shares(outcomes: np.ndarray | None) -> dict[str, float]:
+    """The share of episodes with each outcome of :data:`OUTCOME_KEYS` (NaN when there are no outcomes)."""
+    if outcomes is None or len(outcomes) == 0:
+        return dict.fromkeys(OUTCOME_KEYS, float("nan"))
+    return {key: float(np.mean(outcomes == name)) for key, name in OUTCOME_KEYS.items()}
 
 
 class GroundTruthCheck:
@@ -236,4 +249,5 @@ class Evaluator:
         result["timeout_share"] = float(np.mean(~uni.terminated))
         result.update(self.ground_truth.measure(agent) if self.ground_truth is not None else
                       dict.fromkeys(TRUTH_KEYS, float("nan")))
+        result.update(outcome_shares(uni.outcomes))
         return result, uni

@@ -6,7 +6,8 @@ A run folder written by :func:`train_run` (and ``mope train``) holds::
     metrics.csv          one row per evaluation: step, wall_s, cr, precision, recall, hv, eum, eum_optimal,
                          eum_gap, optimal_share, cardinality, timeout_share, path_error, state_error,
                          overestimation (against the exact Q* where the dynamics are known, else NaN), loss, epsilon,
-                         train_s (wall_s without the evaluations)
+                         win_share, loss_share, out_share (episode outcomes where the environment reports them:
+                         the confrontation game), train_s (wall_s without the evaluations)
     train_stats.csv      every log_every steps: the mean of each update statistic over those steps (loss,
                          loss_a, loss_b, td_abs, q_mean, q_max, mi_bonus, disc_loss) and epsilon
     solutions.csv        the final evaluation: preference, discounted and undiscounted return per preference
@@ -42,13 +43,14 @@ from mope.checkpoint import mope_version
 from mope.config import Config
 from mope.envs import make_env
 from mope.errors import CheckpointError, MopeError
-from mope.evaluation import TRUTH_KEYS, Evaluator, Solutions, solutions
+from mope.evaluation import OUTCOME_KEYS, TRUTH_KEYS, Evaluator, Solutions, solutions
 from mope.locks import FolderLock
 from mope.metrics import EVALUATE_KEYS
 from mope.preferences import validate_preference
 from mope.runner import Callback, EvalCallback, IntervalStats, ProgressBar, StopWhen, train
 
-METRIC_COLUMNS = ["step", "wall_s", *EVALUATE_KEYS, "timeout_share", *TRUTH_KEYS, "loss", "epsilon", "train_s"]
+METRIC_COLUMNS = ["step", "wall_s", *EVALUATE_KEYS, "timeout_share", *TRUTH_KEYS, *OUTCOME_KEYS, "loss", "epsilon",
+                  "train_s"]
 #: Interval averages of the update statistics (``IntervalStats``), every ``log_every`` steps.
 TRAIN_STATS = "train_stats.csv"
 STATS_COLUMNS = ["step", "updates", "epsilon", "loss", "loss_a", "loss_b", "td_abs", "q_mean", "q_max", "mi_bonus",

@@ -165,19 +165,23 @@ def _resume(run_dir: Path, given: list[str], device: str | None, progress: bool)
 
 
 def _print_final(cfg: Config, result: Any) -> None:
+    import math
+
     f = {k: result.final.get(k, float("nan")) for k in ("cr", "hv", "eum", "eum_optimal", "optimal_share",
-                                                          "timeout_share")}
+                                                          "timeout_share", "path_error")}
+    truth = f"  path error {f['path_error']:.3f}" if math.isfinite(f["path_error"]) else ""
     typer.echo(
         f"{cfg.algo} on {cfg.env_id}, {cfg.total_steps} steps, seed {cfg.seed}: CR {f['cr']:.3f}  HV {f['hv']:.2f}  "
         f"EUM {f['eum']:.3f} (optimum {f['eum_optimal']:.3f})  optimal share {f['optimal_share']:.3f}  "
-        f"timeouts {f['timeout_share']:.3f}  [{result.wall_s:.0f} s]\nrun folder: {result.out_dir}"
+        f"timeouts {f['timeout_share']:.3f}{truth}  [{result.wall_s:.0f} s]\nrun folder: {result.out_dir}"
     )
 
 
 def _print_metrics(res: dict[str, float]) -> None:
     for key in ("cr", "precision", "recall", "hv", "eum", "eum_optimal", "eum_gap", "optimal_share",
-                "cardinality", "timeout_share"):
-        if key in res:
+                "cardinality", "timeout_share", "path_error", "state_error", "overestimation", "win_share",
+                "loss_share", "out_share"):
+        if key in res and res[key] == res[key]:  # NaN: not measured on this environment
             typer.echo(f"{key:>14}: {res[key]:.4f}")
 
 

@@ -28,6 +28,7 @@ KNOWN_REF_POINTS: dict[str, tuple[float, ...]] = {
     "fruit-tree-v0": (0.0,) * 6,
     "four-room-v0": (-1.0, -1.0, -1.0),
     "minecart-v0": (-1.0, -1.0, -200.0),
+    "minecart-deterministic-v0": (-1.0, -1.0, -200.0),
     "resource-gathering-v0": (-1.0, -1.0, -2.0),
 }
 

@@ -26,10 +26,10 @@ SMALL = {"hidden_sizes": (16, 16), "n_omega": 4, "batch_size": 8, "learning_star
          "disc_hidden": (8,)}
 
 
-def cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+def cli(*args: str, cwd: Path | None = None, timeout: int = 600) -> subprocess.CompletedProcess:
     env = {**os.environ, "COLUMNS": "300", "TERM": "dumb"}
     return subprocess.run([sys.executable, "-m", "mope.cli", *args], capture_output=True, text=True, cwd=cwd,
-                          timeout=600, env=env)
+                          timeout=timeout, env=env)
 
 
 # ------------------------------------------------------------------------------------------- variants
@@ -253,7 +253,7 @@ def test_benchmark_bad_input_is_one_line(tmp_path: Path, args: list[str], needle
 @pytest.mark.slow
 def test_benchmark_quick_runs_and_keeps_finished_runs(tmp_path: Path) -> None:
     out = tmp_path / "bench"
-    res = cli("benchmark", "--quick", "--out", str(out), "--no-progress")
+    res = cli("benchmark", "--quick", "--out", str(out), "--no-progress", timeout=1500)
     assert res.returncode == 0, res.stderr
     text = (out / "benchmark.md").read_text()
     for env_id in ("deep-sea-treasure-v0", "resource-gathering-v0", "minecart-deterministic-v0", "four-room-v0"):

@@ -52,17 +52,19 @@ class EnvBench:
     source: str
 
 
+#: ``--quick`` evaluates at most this many preferences, episodes of at most this many steps, twice per run.
+QUICK_PREFS, QUICK_EPISODE_CAP = 100, 200
 #: The environments of the benchmark, each with its evaluation settings and budget.
 BENCH_ENVS: dict[str, EnvBench] = {
-    "deep-sea-treasure-v0": EnvBench(20_000, 3_000, 1_000, 2_000, None,
+    "deep-sea-treasure-v0": EnvBench(20_000, 2_000, 1_000, 2_000, None,
                                      "the MoPE paper (Fig. 2) and Yang et al.: 20k steps, 2,000 preferences"),
-    "resource-gathering-v0": EnvBench(50_000, 3_000, 2_500, 500, None,
+    "resource-gathering-v0": EnvBench(50_000, 2_000, 2_500, 500, None,
                                       "no published EQL budget: 2.5x Deep-Sea-Treasure's (a 5x5 grid, 3 objectives, "
                                       "the front's 3 points need the enemy-free detours)"),
-    "minecart-deterministic-v0": EnvBench(100_000, 3_000, 5_000, 100, 1_000,
+    "minecart-deterministic-v0": EnvBench(100_000, 2_000, 5_000, 100, 1_000,
                                           "morl-baselines' Envelope example (examples/envelope_minecart.py): 100k "
                                           "steps; 100 preferences (each episode can last 1,000 steps)"),
-    "four-room-v0": EnvBench(50_000, 3_000, 2_500, 200, None,
+    "four-room-v0": EnvBench(50_000, 2_000, 2_500, 200, None,
                              "no published front or budget: 50k steps (a 13x13 grid, 3 objectives); HV and EUM "
                              "against the best any method found"),
 }
@@ -104,18 +106,20 @@ def benchmark_jobs(envs: list[str], methods: list[str], seeds: int, quick: bool,
         for env_id in envs:
             b = BENCH_ENVS[env_id]
             total = steps or (b.quick_steps if quick else b.steps)
-            every = max(1, total // 3) if quick else min(b.eval_every, total)
+            every = max(1, total // 2) if quick else min(b.eval_every, total)
+            prefs = min(b.eval_prefs, QUICK_PREFS) if quick else b.eval_prefs
+            cap = min(b.max_episode_steps or QUICK_EPISODE_CAP, QUICK_EPISODE_CAP) if quick else b.max_episode_steps
             name = f"{env_id}-{{m}}-s{seed}".replace("/", "_")
             for m in methods:
                 if m == "envelope":
                     jobs.append(Job(name.format(m=m), "envelope", {
                         "env_id": env_id, "seed": seed, "total_steps": total, "eval_every": every,
-                        "eval_prefs": b.eval_prefs, "max_episode_steps": b.max_episode_steps, "gamma": 0.99,
+                        "eval_prefs": prefs, "max_episode_steps": cap, "gamma": 0.99,
                         "overrides": ENVELOPE_EXAMPLE}))
                     continue
                 cfg = Config.from_dict({**METHODS[m], "env_id": env_id, "seed": seed, "total_steps": total,
-                                        "eval_every": every, "eval_prefs": b.eval_prefs,
-                                        "max_episode_steps": b.max_episode_steps, "checkpoint_every": every})
+                                        "eval_every": every, "eval_prefs": prefs, "max_episode_steps": cap,
+                                        "checkpoint_every": every})
                 jobs.append(Job(name.format(m=m), "train", cfg.to_dict()))
     return jobs
 
@@ -266,7 +270,8 @@ def run_benchmark(out: str | Path, envs: list[str] | None = None, methods: list[
         envs: Environments (default: every one of :data:`BENCH_ENVS`).
         methods: Methods (default: mope, eql, mope-paper, and envelope when morl-baselines is installed).
         seeds: Seeds per (environment, method); ``quick`` forces 1.
-        quick: Small budgets (each environment's ``quick_steps``), one seed: a first look, and CI's test.
+        quick: Small budgets (each environment's ``quick_steps``), one seed, at most 100 preferences and 200-step
+            episodes per evaluation, two evaluations per run: a first look, and CI's test.
         steps: Override every environment's budget.
         workers: Jobs at once (default every core).
         backend, address: The job runner's backend (``local`` or ``ray``) and Ray address.

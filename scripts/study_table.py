@@ -25,9 +25,9 @@ def main() -> None:
     doc = json.loads(a.report.read_text())
     groups = {g["label"]: g for g in doc["groups"]}
     order = a.order.split(",") if a.order else list(groups)
-    print("| arm | seeds | CR | optimal share | path error | time-outs | seeds at CR = 1 | first step at CR = 1 "
-          "(median) | best CR - final CR |")
-    print("|---|---:|---|---|---|---|---:|---:|---|")
+    print("| arm | seeds | CR | optimal share | path error | overestimate at s0 | time-outs | seeds at CR = 1 | "
+          "first step at CR = 1 (median) | best CR - final CR |")
+    print("|---|---:|---|---|---|---|---|---:|---:|---|")
     for label in order:
         g = groups[label]
         s = g["stats"]
@@ -37,7 +37,9 @@ def main() -> None:
         reached = sum(f is not None for f in firsts)
         first = "never" if med is None or (isinstance(med, float) and math.isinf(med)) else f"{med:,.0f}"
         print(f"| {label} | {len(g['runs'])} | {cell(s.get('cr'), '.3f')} | {cell(s.get('optimal_share'), '.3f')} | "
-              f"{cell(s.get('path_error'), '.4f')} | {cell(s.get('timeout_share'), '.3f')} | {reached}/{len(firsts)} | "
+              f"{cell(s.get('path_error'), '.4f')} | "
+              f"{cell(s.get('overestimation'), '.3f')} | {cell(s.get('timeout_share'), '.3f')} | "
+              f"{reached}/{len(firsts)} | "
               f"{first} | {cell(cov.get('cr_drop'), '.3f')} |")
 
 

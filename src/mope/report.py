@@ -30,13 +30,16 @@ import numpy as np
 
 from mope.errors import MopeError
 
-DEFAULT_METRICS = ("cr", "igd", "hv", "eum", "optimal_share", "timeout_share", "path_error", "win_share", "out_share")
+DEFAULT_METRICS = ("cr", "igd", "hv", "eum", "optimal_share", "timeout_share", "path_error", "overestimation",
+                   "win_share", "out_share")
 METRIC_LABELS = {"cr": "CR", "hv": "HV", "eum": "EUM", "optimal_share": "optimal share",
                  "timeout_share": "time-outs", "eum_gap": "EUM gap", "precision": "precision", "recall": "recall",
                  "cardinality": "cardinality", "eum_optimal": "EUM optimum", "igd": "IGD", "path_error": "path error",
+                 "overestimation": "overestimate at s0",
                  "win_share": "wins", "out_share": "out of arena", "loss_share": "losses"}
 #: Number formats per metric in report.md (report.json keeps full precision).
-FORMATS = {"igd": ".2f", "hv": ".1f", "eum": ".2f", "eum_gap": ".2f", "eum_optimal": ".2f", "cardinality": ".1f"}
+FORMATS = {"overestimation": ".3f", "igd": ".2f", "hv": ".1f", "eum": ".2f", "eum_gap": ".2f", "eum_optimal": ".2f",
+           "cardinality": ".1f"}
 #: Config fields that never split groups: the seed, and settings that do not change a run's results.
 IGNORED_FIELDS = ("seed", "device", "torch_threads", "checkpoint_every", "log_every")
 #: Fields named first in group labels.

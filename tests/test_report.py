@@ -38,7 +38,7 @@ def write_run(folder: Path, algo: str, seed: int, final: tuple[float, ...], tota
             row = {k: 0.0 for k in METRIC_COLUMNS}
             row.update(step=step, wall_s=1.0 + i, cr=cr * scale, hv=hv * scale, eum=eum * scale,
                        optimal_share=opt * scale, timeout_share=to * scale,
-                       igd=math.nan, path_error=math.nan, win_share=math.nan,
+                       igd=math.nan, path_error=math.nan, overestimation=math.nan, win_share=math.nan,
                        out_share=math.nan)  # the report leaves an all-NaN metric out
             w.writerow(row)
     with open(folder / "solutions.csv", "w", newline="") as f:

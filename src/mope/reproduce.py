@@ -132,12 +132,21 @@ def summarise_variant(out: Path, algo: str, seeds: int, n_prefs: int) -> tuple[d
                          "reached": int(np.sum(~np.isnan(t_full))), "seeds": seeds,
                          "values": [None if np.isnan(t) else float(t) for t in t_full]},
         "best_cr": [float(max(r["cr"] for r in rows)) for rows in metric_rows],
-        "paths_per_solution": float(np.mean([r["paths"]["paths_per_solution"] for r in runs])),
-        "mi_state_pref": float(np.mean([r["mi"] for r in runs])),
+        "paths_per_solution": _mean_ci([r["paths"]["paths_per_solution"] for r in runs]),
+        "mi_state_pref": _mean_ci([r["mi"] for r in runs]),
         "s_per_1k_steps": float(np.mean([json.loads((out / run_name(algo, s) / "summary.json").read_text())
                                          ["s_per_1k_steps"] for s in range(seeds)])),
     }
     return result, runs[0], curves
+
+
+def _mean_ci(values: Sequence[float]) -> dict[str, Any]:
+    """Mean over seeds with the bootstrap 95 % CI of the mean (the diversity measures of Fig. 3)."""
+    from mope.report import bootstrap_ci
+
+    lo, hi = bootstrap_ci(list(values))
+    return {"mean": float(np.mean(values)), "ci_low": float(lo), "ci_high": float(hi),
+            "values": [float(v) for v in values]}
 
 
 def render_dst(out: Path, algos: Sequence[str], results: dict[str, Any], analyses: dict[str, Any],
@@ -171,8 +180,12 @@ def dst_table(algos: Sequence[str], results: dict[str, Any]) -> str:
     def pm(d: dict[str, float], fmt: str = ".3f") -> str:
         return f"{d['mean']:{fmt}} ± {d['std']:{fmt}}"
 
+    def ci(d: dict[str, Any], fmt: str) -> str:
+        return f"{d['mean']:{fmt}} [{d['ci_low']:{fmt}}, {d['ci_high']:{fmt}}]"
+
     header = ["variant", "final CR", "steps to CR = 1 (median; seeds)", "HV", "EUM (optimum)", "optimal share",
-              "time-outs", "path error", "routes per treasure", "I(S; C) nats", "s / 1k steps"]
+              "time-outs", "path error", "routes per treasure [95 % CI]",
+              "I(S; C) nats [95 % CI]", "s / 1k steps"]
     rows = []
     for a in algos:
         r = results[a]
@@ -180,8 +193,8 @@ def dst_table(algos: Sequence[str], results: dict[str, Any]) -> str:
         rows.append([a, pm(r["cr"]), f"{t['median']:.0f} ({t['reached']}/{t['seeds']})" if t["median"] else
                      f"never ({t['reached']}/{t['seeds']})", pm(r["hv"], ".1f"),
                      f"{pm(r['eum'], '.2f')} ({r['eum_optimal']['mean']:.2f})", pm(r["optimal_share"]),
-                     pm(r["timeout_share"]), pm(r["path_error"]), f"{r['paths_per_solution']:.2f}",
-                     f"{r['mi_state_pref']:.3f}",
+                     pm(r["timeout_share"]), pm(r["path_error"]), ci(r["paths_per_solution"], ".2f"),
+                     ci(r["mi_state_pref"], ".3f"),
                      f"{r['s_per_1k_steps']:.1f}"])
     return markdown_table(header, rows)
 
@@ -212,7 +225,9 @@ def reproduce_dst(out: str | Path, seeds: int = 3, steps: int = 20_000, eval_eve
             for key in CURVES:
                 curves[key][a] = variant_curves[key]
         table = render_dst(out, algos, results, analyses, curves)
+        runs_wall = sum(json.loads((out / j.name / "summary.json").read_text())["wall_s"] for j in jobs)
         (out / "results.json").write_text(json.dumps({"results": results, "seeds": seeds, "steps": steps,
                                                       "env_id": env_id, "train_wall_s": train_wall,
-                                                      "overrides": overrides}, indent=2))
-    return {"results": results, "table": table, "out": out, "train_wall_s": train_wall, "records": records}
+                                                      "runs_wall_s": runs_wall, "overrides": overrides}, indent=2))
+    return {"results": results, "table": table, "out": out, "train_wall_s": train_wall, "runs_wall_s": runs_wall,
+            "records": records}

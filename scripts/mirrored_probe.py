@@ -1,0 +1,59 @@
+"""Single-seed probes of the divergence on deep-sea-treasure-mirrored-v0 (seed 2 diverges by 8k steps with the
+defaults: overestimate 24.6 at 8k, 121.9 at 9k). Each probe changes one thing; 9k steps of a 20k-step run.
+
+    python scripts/mirrored_probe.py NAME '{"config_key": value}' [double-components] [--env ID] [--seed S]
+        [--steps N]
+
+``double-components`` (not in mope): with the convex head, the target network picks its own best component
+(a max over C noisy vectors that double Q does not cover); this variant selects the component with the online
+network and reads it from the target network.
+"""
+import json
+import sys
+import time
+
+import torch
+
+from mope import losses
+from mope.agent import MoPE
+from mope.config import Config
+from mope.envs import make_env
+
+
+def gather_components(v: torch.Tensor, best: torch.Tensor) -> torch.Tensor:
+    b, a, c, m = v.shape
+    k = best.shape[1]
+    return v.unsqueeze(1).expand(b, k, a, c, m).gather(3, best[..., None, None].expand(b, k, a, 1, m)).squeeze(3)
+
+
+class DoubleComponents(MoPE):
+    def _envelope_target(self, batch, w, acting):
+        c = self.config
+        next_obs = self._tensor(batch.next_obs)
+        env_prefs, envelope = losses.envelope_set(c.envelope_prefs, w, acting)
+        v_on = self.q_net.components(next_obs)
+        v_tg = self.target_net.components(next_obs)
+        best = torch.einsum("bkm,bacm->bkac", env_prefs, v_on).argmax(dim=3)
+        y = losses.envelope_target(gather_components(v_tg, best), self._tensor(batch.rewards),
+                                   self._tensor(batch.terminated), w, c.gamma,
+                                   q_select=gather_components(v_on, best), envelope=envelope)
+        return losses.clip_targets(y, self._q_low_t, self._q_high_t) if c.clip_targets else y
+
+
+def option(flag: str, default: str) -> str:
+    return sys.argv[sys.argv.index(flag) + 1] if flag in sys.argv else default
+
+
+name, overrides = sys.argv[1], json.loads(sys.argv[2])
+cls = DoubleComponents if "double-components" in sys.argv[3:] else MoPE
+env_id, seed, steps = option("--env", "deep-sea-treasure-mirrored-v0"), int(option("--seed", "2")), \
+    int(option("--steps", "9000"))
+cfg = Config.from_dict({"env_id": env_id, "algo": "mope", "seed": seed, "total_steps": 20000, **overrides})
+agent = cls(env_id, cfg)
+t = time.time()
+recs = agent.train(steps, eval_env=make_env(env_id), eval_every=3000 if steps < 20000 else 5000)
+out = {"probe": name, "env": env_id, "seed": seed, "class": cls.__name__, "overrides": overrides,
+       "s": round(time.time() - t),
+       "evals": [{k: round(float(r[k]), 3) for k in ("step", "cr", "timeout_share", "path_error", "overestimation")}
+                 for r in recs]}
+print(json.dumps(out), flush=True)

@@ -141,12 +141,12 @@ def summarise_variant(out: Path, algo: str, seeds: int, n_prefs: int) -> tuple[d
 
 
 def _mean_ci(values: Sequence[float]) -> dict[str, Any]:
-    """Mean over seeds with the bootstrap 95 % CI of the mean (the diversity measures of Fig. 3)."""
-    from mope.report import bootstrap_ci
+    """The diversity measures of Fig. 3 over seeds: :func:`mope.report.aggregate` (mean, std, bootstrap CI)."""
+    from dataclasses import asdict
 
-    lo, hi = bootstrap_ci(list(values))
-    return {"mean": float(np.mean(values)), "ci_low": float(lo), "ci_high": float(hi),
-            "values": [float(v) for v in values]}
+    from mope.report import aggregate
+
+    return asdict(aggregate(values))
 
 
 def render_dst(out: Path, algos: Sequence[str], results: dict[str, Any], analyses: dict[str, Any],

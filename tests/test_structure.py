@@ -202,6 +202,18 @@ def test_a_checkpoint_rebuilds_the_wrapped_environment_it_was_trained_on(tmp_pat
     assert MoPE.load(tmp_path / "hand.pt", env=DiscreteActions(RobotConfrontationEnv(), bins=3)).n_actions == 9
 
 
+def test_a_checkpoint_of_the_mirrored_map_loads_without_env(tmp_path: Path) -> None:
+    """MO-Gymnasium registers the mirrored map as a numpy array that JSON cannot hold: the checkpoint names the
+    registration's argument and takes it from the registry on load (it used to refuse to load without env=)."""
+    agent = MoPE("deep-sea-treasure-mirrored-v0", **SMALL)
+    agent.save(tmp_path / "mirrored.pt")
+    back = MoPE.load(tmp_path / "mirrored.pt")
+    assert np.array_equal(back.env.unwrapped.sea_map, agent.env.unwrapped.sea_map)
+    assert back.env.unwrapped.sea_map.shape == (11, 20)
+    obs, w = np.array([[0, 10]]), np.array([[0.3, 0.7]])
+    np.testing.assert_array_equal(back.q_values(obs, w), agent.q_values(obs, w))
+
+
 # ------------------------------------------------------------------------------------------- job runner
 @pytest.mark.slow
 def test_an_interrupted_reproduction_resumes_through_the_job_runner(tmp_path: Path, monkeypatch) -> None:

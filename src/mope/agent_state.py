@@ -12,6 +12,7 @@ rebuilt that way loads only with ``env=`` given, and says so.
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -45,10 +46,29 @@ def env_recipe(env: gym.Env) -> dict[str, Any]:
     unrecorded = [w.name for w in spec.additional_wrappers if w.kwargs is None]
     if unrecorded:
         return {"spec": None, "why": f"its wrapper {unrecorded[0]} does not record its arguments"}
+    # Keyword arguments that are the registration's own (MO-Gymnasium registers the mirrored DST map as a numpy
+    # array, which JSON cannot hold) are saved by name and taken from the registry again on load.
+    registered = _registered_kwargs(spec)
+    same = sorted(k for k, v in spec.kwargs.items() if k in registered and _same(v, registered[k]))
     try:
-        return {"spec": spec.to_json()}
+        return {"spec": dataclasses.replace(spec, kwargs={k: v for k, v in spec.kwargs.items() if k not in same})
+                .to_json(), "registered_kwargs": same}
     except (ValueError, TypeError) as exc:
         return {"spec": None, "why": f"its spec cannot be saved ({str(exc).splitlines()[0]})"}
+
+
+def _registered_kwargs(spec: gym.envs.registration.EnvSpec) -> dict[str, Any]:
+    try:
+        return dict(gym.spec(spec.id).kwargs)
+    except Exception:  # noqa: BLE001 - an unregistered id: nothing to take from the registry
+        return {}
+
+
+def _same(a: Any, b: Any) -> bool:
+    try:
+        return bool(np.array_equal(a, b)) if isinstance(a, np.ndarray) or isinstance(b, np.ndarray) else a == b
+    except Exception:  # noqa: BLE001 - values that cannot be compared are not the same
+        return False
 
 
 def rebuild_env(saved: dict[str, Any], config: Config, path: str | Path) -> gym.Env | str:
@@ -64,7 +84,12 @@ def rebuild_env(saved: dict[str, Any], config: Config, path: str | Path) -> gym.
             f"checkpoint '{path}' was trained on an environment that cannot be rebuilt from the checkpoint "
             f"({saved.get('why', 'unknown reason')}); load it in Python with MoPE.load(path, env=your_env)")
     try:
-        return gym.make(gym.envs.registration.EnvSpec.from_json(saved["spec"]))
+        spec = gym.envs.registration.EnvSpec.from_json(saved["spec"])
+        names = saved.get("registered_kwargs") or []
+        if names:
+            registered = gym.spec(spec.id).kwargs
+            spec = dataclasses.replace(spec, kwargs={**{k: registered[k] for k in names}, **spec.kwargs})
+        return gym.make(spec)
     except Exception as exc:  # noqa: BLE001 - a missing package, a removed registration, bad kwargs
         raise EnvironmentError_(f"checkpoint '{path}': its environment '{config.env_id}' could not be rebuilt "
                                 f"({str(exc).splitlines()[0] if str(exc) else type(exc).__name__}); pass env=") \

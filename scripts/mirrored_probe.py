@@ -31,8 +31,8 @@ class DoubleComponents(MoPE):
         c = self.config
         next_obs = self._tensor(batch.next_obs)
         env_prefs, envelope = losses.envelope_set(c.envelope_prefs, w, acting)
-        v_on = self.q_net.components(next_obs)
-        v_tg = self.target_net.components(next_obs)
+        v_on = self.q_net.components(next_obs)[:, 0]  # one head (n_critics = 1)
+        v_tg = self.target_net.components(next_obs)[:, 0]
         best = torch.einsum("bkm,bacm->bkac", env_prefs, v_on).argmax(dim=3)
         y = losses.envelope_target(gather_components(v_tg, best), self._tensor(batch.rewards),
                                    self._tensor(batch.terminated), w, c.gamma,

@@ -194,3 +194,16 @@ def test_mope_covers_deep_sea_treasure_with_an_exact_greedy_policy():
     assert final["cr"] >= 0.9 and final["timeout_share"] <= 0.02, final
     assert final["path_error"] <= 0.03 and final["optimal_share"] >= 0.85, final
     assert abs(final["overestimation"]) <= 0.5, final
+
+
+def test_maxmin_heads_train_save_and_load(tmp_path):
+    agent = MoPE("deep-sea-treasure-v0", **SMALL, n_critics=2, total_steps=300)
+    assert agent.q_net.n_critics == 2 and agent.target_net.n_critics == 2
+    agent.train(300)
+    stats = agent.last_losses
+    assert stats and all(np.isfinite(v) for v in stats.values())
+    agent.save(tmp_path / "c2.pt")
+    back = MoPE.load(tmp_path / "c2.pt")
+    assert back.config.n_critics == 2
+    obs, w = np.array([[0, 0], [2, 1]]), np.array([[0.2, 0.8], [0.7, 0.3]])
+    np.testing.assert_array_equal(back.q_values(obs, w), agent.q_values(obs, w))

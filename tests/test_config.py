@@ -102,6 +102,7 @@ def test_for_algo_contradiction() -> None:
         ({"n_omega": 0}, "n_omega", "0"),
         ({"mi_alpha": -0.1}, "mi_alpha", "-0.1"),
         ({"n_intervals": 0}, "n_intervals", "0"),
+        ({"n_critics": 0}, "n_critics", "0"),
         ({"gamma": 0.0}, "gamma", "0.0"),
         ({"gamma": 1.5}, "gamma", "1.5"),
         ({"gamma": float("nan")}, "gamma", "nan"),
@@ -281,3 +282,13 @@ def test_a_config_saved_by_mope_0_1_reads_with_the_defaults_it_was_trained_with(
     c = Config.from_dict(saved)
     assert c.q_head == "conditioned" and c.target_tau is None and c.relabel_broad == 0.0 and c.seed == 1
     assert c.learning_rate_end is None
+
+
+def test_a_config_saved_before_the_later_fields_keeps_the_values_it_ran_with() -> None:
+    from mope.config import LATER_FIELDS
+
+    saved = {k: v for k, v in Config().to_dict().items() if k not in LATER_FIELDS}
+    old = Config.from_dict(saved)
+    assert {k: getattr(old, k) for k in LATER_FIELDS} == LATER_FIELDS
+    partial = Config.from_dict({"q_head": "convex", "seed": 3})  # a user's overrides get today's defaults
+    assert {k: getattr(partial, k) for k in LATER_FIELDS} == {k: getattr(Config(), k) for k in LATER_FIELDS}

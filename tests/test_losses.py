@@ -10,6 +10,7 @@ import torch
 
 from mope.losses import (
     clip_targets,
+    component_loss,
     envelope_set,
     envelope_target,
     eql_loss,
@@ -259,3 +260,11 @@ def test_priority_applies_the_per_exponent() -> None:
     td = torch.tensor([0.99, 3.99])
     p = priority(td, None, alpha=0.1, eps=0.01, per_alpha=0.5)
     np.testing.assert_allclose(p, [1.0, 2.0], rtol=1e-6)  # (|td| + eps) ** 0.5
+
+
+def test_component_loss_anchor_pulls_every_component_toward_its_nearest_target() -> None:
+    comps = torch.tensor([[[0.0], [10.0]]])  # (B=1, C=2, m=1)
+    y = torch.tensor([[[1.0], [2.0]]])  # (B=1, N=2, m=1)
+    # each target's nearest component is 0: (1 + 4) / 2; each component's nearest target: 0 -> 1, 10 -> 2: (1 + 64) / 2
+    torch.testing.assert_close(component_loss(comps, y), torch.tensor([2.5]))
+    torch.testing.assert_close(component_loss(comps, y, anchor_weight=0.5), torch.tensor([2.5 + 0.5 * 32.5]))

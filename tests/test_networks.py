@@ -11,7 +11,7 @@ import torch
 from torch import nn
 
 from mope.errors import EnvironmentError_
-from mope.networks import Discriminator, ObsEncoder, QNetwork, mlp
+from mope.networks import ConvexQNetwork, Discriminator, ObsEncoder, QNetwork, mlp
 
 DST_SPACE = gym.spaces.Box(low=0, high=11, shape=(2,), dtype=np.int32)
 
@@ -210,3 +210,34 @@ def test_onehot_encoding_refuses_a_float_box() -> None:
 
     with pytest.raises(EnvironmentError_, match="integer Box"):
         ObsEncoder(gym.spaces.Box(low=0.0, high=1.0, shape=(2,)), "onehot")
+
+
+# ------------------------------------------------------------------------------------------- ConvexQNetwork
+def test_convex_head_selects_the_component_the_preference_prefers() -> None:
+    v = torch.tensor([[[[[1.0, 0.0], [0.0, 1.0], [0.4, 0.4]]]]])  # (B=1, H=1, A=1, C=3, m=2)
+    prefs = torch.tensor([[[0.9, 0.1], [0.1, 0.9], [0.5, 0.5]]])  # (B=1, K=3, m)
+    q = ConvexQNetwork.select(v, prefs)  # (1, 1, 3, 1, 2)
+    torch.testing.assert_close(q[0, 0, :, 0], torch.tensor([[1.0, 0.0], [0.0, 1.0], [1.0, 0.0]]))
+
+
+def test_maxmin_heads_take_the_lowest_scalarised_head_per_preference_and_action() -> None:
+    # two heads, one row, two preferences, two actions
+    q = torch.tensor([[[[[3.0, 0.0], [1.0, 1.0]], [[3.0, 0.0], [1.0, 1.0]]],     # head 0: (K=2, A=2, m=2)
+                       [[[2.0, 2.0], [0.0, 3.0]], [[2.0, 2.0], [0.0, 3.0]]]]])   # head 1
+    prefs = torch.tensor([[[1.0, 0.0], [0.0, 1.0]]])
+    low = ConvexQNetwork.pessimistic(q, prefs)  # (1, K, A, m)
+    # w = (1, 0): action 0 -> min(3, 2) is head 1's (2, 2); action 1 -> min(1, 0) is head 1's (0, 3)
+    # w = (0, 1): action 0 -> min(0, 2) is head 0's (3, 0); action 1 -> min(1, 3) is head 0's (1, 1)
+    torch.testing.assert_close(low, torch.tensor([[[[2.0, 2.0], [0.0, 3.0]], [[3.0, 0.0], [1.0, 1.0]]]]))
+    torch.testing.assert_close(ConvexQNetwork.pessimistic(q[:, :1], prefs), q[:, 0])  # one head: itself
+
+
+def test_maxmin_network_acts_on_the_minimum_of_its_heads() -> None:
+    torch.manual_seed(0)
+    net = ConvexQNetwork(DST_SPACE, 4, 2, (16,), "onehot", n_components=3, n_critics=2)
+    assert net.net[-1].out_features == 2 * 4 * 3 * 2
+    obs, w = torch.tensor([[0, 0], [3, 5]]), torch.tensor([[0.3, 0.7], [0.8, 0.2]])
+    per_head = ConvexQNetwork.select(net.components(obs), w.unsqueeze(1))[:, :, 0]  # (B, H, A, m)
+    scal = (per_head * w[:, None, None]).sum(-1)  # (B, H, A)
+    q = net(obs, w)
+    torch.testing.assert_close((q * w[:, None]).sum(-1), scal.min(dim=1).values)

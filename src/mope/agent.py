@@ -136,7 +136,7 @@ class MoPE(BaseAgent):
 
         def q_network() -> nn.Module:
             return make_q_network(spec.obs_space, self.n_actions, self.m, cfg.hidden_sizes, cfg.obs_encoding,
-                                  cfg.q_head, cfg.n_components).to(self.device)
+                                  cfg.q_head, cfg.n_components, cfg.n_critics).to(self.device)
 
         self.q_net = q_network()
         self.target_net = q_network()
@@ -260,10 +260,14 @@ class MoPE(BaseAgent):
         """Q(s, a, w) of the taken actions and the per-transition loss: eq. 4 (with the L^B weight or homotopy of
         the config), plus the convex head's component loss."""
         c = self.config
-        if isinstance(self.q_net, ConvexQNetwork):
-            comps = self.q_net.components(obs)
-            q = losses.taken_action_q(self.q_net.select(comps, w), actions)
-            comp_loss = losses.component_loss(comps[torch.arange(len(actions)), actions], y)
+        heads = 1
+        if isinstance(self.q_net, ConvexQNetwork):  # every head learns the same targets (rows b*H + h)
+            comps = self.q_net.components(obs)  # (B, H, A, C, m)
+            heads = comps.shape[1]
+            actions, w, y = (t.repeat_interleave(heads, dim=0) for t in (actions, w, y))
+            q = losses.taken_action_q(self.q_net.select(comps, w[::heads]).flatten(0, 1), actions)
+            comp_loss = losses.component_loss(comps.flatten(0, 1)[torch.arange(len(actions)), actions], y,
+                                              c.component_anchor_weight)
         else:
             q = losses.taken_action_q(self.q_net.forward_prefs(obs, w), actions)
             comp_loss = None
@@ -277,6 +281,10 @@ class MoPE(BaseAgent):
         if comp_loss is not None:
             loss_rows = loss_rows + c.component_loss_weight * comp_loss
             parts["loss_components"] = comp_loss
+        if heads > 1:  # per transition: the heads' losses summed, their statistics and Q averaged
+            loss_rows = loss_rows.view(-1, heads).sum(1)
+            parts = {k: v.view(-1, heads).mean(1) for k, v in parts.items()}
+            q = q.view(-1, heads, *q.shape[1:]).mean(1)
         return q, loss_rows, parts
 
     def _per_beta(self) -> float:

@@ -56,6 +56,10 @@ PRESETS: dict[str, dict[str, Any]] = {
                  "per_alpha": 0.6},
 }
 
+#: Fields added after mope 0.2.0, with the values that reproduce the runs saved before them: a saved config (it has
+#: every other field) that lacks them is read with these values, not with today's defaults.
+LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0}
+
 
 def check_preset(name: str) -> str:
     """Return ``name`` if it names a preset, else raise a :class:`ConfigError` with the closest name."""
@@ -174,8 +178,12 @@ class Config:
     q_head: str = "convex"
     #: C, return vectors per action of the convex head.
     n_components: int = 12
+    #: H, heads of the convex head whose minimum is Q (Maxmin Q-learning, Lan et al. 2020); 1: a single head.
+    n_critics: int = 1
     #: Weight of the convex head's component loss (each target also trains its nearest component).
     component_loss_weight: float = 1.0
+    #: Within the component loss, weight of the pull of every component toward its nearest target (0: off).
+    component_anchor_weight: float = 0.0
     hidden_sizes: tuple[int, ...] = (256, 256, 256)
     learning_rate: float = 3e-4
     #: Cosine decay of the learning rate to this value over total_steps; None keeps it constant.
@@ -299,12 +307,12 @@ class Config:
         for name in ("learning_rate", "disc_learning_rate", "sigma_omega", "per_eps", "pe_count_offset"):
             need(_finite(getattr(self, name)) and getattr(self, name) > 0, name, "must be > 0")
         for name in ("batch_size", "gradient_steps", "target_update_freq", "epsilon_decay_steps", "n_omega",
-                     "n_intervals", "n_components"):
+                     "n_intervals", "n_components", "n_critics"):
             need(getattr(self, name) >= 1, name, "must be >= 1")
         need(self.buffer_size >= self.batch_size, "buffer_size", f"must be >= batch_size ({self.batch_size})")
         for name in ("learning_starts", "lb_homotopy_steps"):
             need(getattr(self, name) >= 0, name, "must be >= 0")
-        for name in ("lb_weight", "per_alpha", "mi_alpha", "component_loss_weight"):
+        for name in ("lb_weight", "per_alpha", "mi_alpha", "component_loss_weight", "component_anchor_weight"):
             need(_finite(getattr(self, name)) and getattr(self, name) >= 0, name, "must be >= 0")
         need(self.max_grad_norm is None or (_finite(self.max_grad_norm) and self.max_grad_norm > 0),
              "max_grad_norm", "must be > 0 or None")
@@ -340,17 +348,21 @@ class Config:
         ``preset`` (see :data:`PRESETS`) sets defaults that the other keys override.
 
         A config saved by mope 0.1 (it has the field ``extra``, always empty, and none of 0.2's) is read with the
-        ``paper`` preset's values for the fields it predates, which were 0.1's defaults.
+        ``paper`` preset's values for the fields it predates, which were 0.1's defaults. A config saved by 0.2.0
+        (every field but those of :data:`LATER_FIELDS`) is read with the values of :data:`LATER_FIELDS`.
         """
         data = dict(data)
         if "extra" in data and "q_head" not in data:  # saved by mope 0.1: its defaults are the paper preset's
             data = {**PRESETS["paper"], **data}
         data.pop("extra", None)
+        names = cls.field_names()
+        later = [k for k in LATER_FIELDS if k not in data]
+        if later and "q_head" in data and set(names) - set(data) == set(later):  # saved before these fields
+            data = {**{k: LATER_FIELDS[k] for k in later}, **data}
         preset = data.pop("preset", None)
         if preset is not None:
             data = {**PRESETS[check_preset(preset)], **data}
         algo = data.pop("algo", None)
-        names = cls.field_names()
         for key in data:
             if key not in names:
                 raise unknown_key_error(key)

@@ -104,22 +104,31 @@ def eql_loss(q: torch.Tensor, y: torch.Tensor, prefs: torch.Tensor, lb_weight: f
     return l_a + lb_weight * l_b, l_a, l_b
 
 
-def component_loss(components: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+def component_loss(components: torch.Tensor, y: torch.Tensor, anchor_weight: float = 0.0) -> torch.Tensor:
     """Convex head (not in the paper): each target also pulls the return vector nearest to it.
 
     ``min_c ||y_i - v_c(s, a)||^2``, averaged over the transition's N targets. The component a preference
     selects is trained through eq. 4; this term lets the other components settle on the other targets, so the
     C vectors spread over the distinct returns reachable from (s, a).
 
+    With ``anchor_weight`` > 0, each component is also pulled toward the target nearest to it,
+    ``anchor_weight * mean_c min_i ||y_i - v_c(s, a)||^2`` (the other half of a Chamfer distance). A component
+    that no target is nearest to is otherwise trained only when a preference selects it, so it drifts with the
+    shared layers; the max over components in the next target then picks up the drift.
+
     Args:
         components: ``(B, C, m)`` the return vectors of the taken action.
         y: ``(B, N, m)`` targets (no gradient).
+        anchor_weight: Weight of the pull of every component toward its nearest target.
 
     Returns:
         ``(B,)`` per-transition losses.
     """
     dist = (components.unsqueeze(1) - y.unsqueeze(2)).pow(2).sum(-1)  # (B, N, C)
-    return dist.min(dim=2).values.mean(dim=1)
+    loss = dist.min(dim=2).values.mean(dim=1)
+    if anchor_weight:
+        loss = loss + anchor_weight * dist.min(dim=1).values.mean(dim=1)
+    return loss
 
 
 def preference_interval_td(q: torch.Tensor, y: torch.Tensor, prefs: torch.Tensor) -> torch.Tensor:

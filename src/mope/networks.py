@@ -180,6 +180,12 @@ class ConvexQNetwork(nn.Module):
     (s, a), the envelope max of eq. 4 over *every* preference is the max over components. The component of a
     target is trained by :func:`mope.losses.component_loss` as well as through ``Q``.
 
+    With ``n_critics`` H > 1 the network has H such heads on one trunk, each trained on the same targets, and
+    ``Q(s, a, omega)`` is the head with the lowest ``omega^T Q_h(s, a, omega)`` (:meth:`pessimistic`): Maxmin
+    Q-learning (Lan et al. 2020). The max over actions and components in the target is then taken over
+    pessimistic values, which curbs the upward bias that a max over many noisy vectors feeds back through
+    rarely visited states.
+
     Args:
         obs_space: The environment's observation space.
         n_actions: |A|.
@@ -187,46 +193,63 @@ class ConvexQNetwork(nn.Module):
         hidden: Hidden layer widths.
         obs_encoding: See :class:`ObsEncoder`.
         n_components: C, vectors per action.
+        n_critics: H, heads whose minimum is Q.
     """
 
     def __init__(self, obs_space: gym.Space, n_actions: int, n_objectives: int,
-                 hidden: Sequence[int] = (256, 256, 256), obs_encoding: str = "scale", n_components: int = 12) -> None:
+                 hidden: Sequence[int] = (256, 256, 256), obs_encoding: str = "scale", n_components: int = 12,
+                 n_critics: int = 1) -> None:
         super().__init__()
         self.encoder = ObsEncoder(obs_space, obs_encoding)
         self.n_actions = n_actions
         self.n_objectives = n_objectives
         self.n_components = n_components
-        self.net = mlp(self.encoder.out_dim, hidden, n_actions * n_components * n_objectives)
+        self.n_critics = n_critics
+        self.net = mlp(self.encoder.out_dim, hidden, n_critics * n_actions * n_components * n_objectives)
 
     def components(self, obs: torch.Tensor) -> torch.Tensor:
-        """``(B, |A|, C, m)`` the return vectors of raw observations ``(B, ...)``."""
-        return self.net(self.encoder(obs)).view(-1, self.n_actions, self.n_components, self.n_objectives)
+        """``(B, H, |A|, C, m)`` the return vectors of every head for raw observations ``(B, ...)``."""
+        return self.net(self.encoder(obs)).view(-1, self.n_critics, self.n_actions, self.n_components,
+                                                self.n_objectives)
 
     @staticmethod
     def select(v: torch.Tensor, prefs: torch.Tensor) -> torch.Tensor:
-        """The preferred component of each action: ``v (B, A, C, m)``, ``prefs (B, K, m)`` -> ``(B, K, A, m)``."""
-        b, a, c, m = v.shape
+        """The preferred component of each head and action: ``v (B, H, A, C, m)``, ``prefs (B, K, m)`` ->
+        ``(B, H, K, A, m)``."""
+        b, h, a, c, m = v.shape
         k = prefs.shape[1]
-        best = torch.einsum("bkm,bacm->bkac", prefs, v).argmax(dim=3)  # (B, K, A)
-        return v.unsqueeze(1).expand(b, k, a, c, m).gather(3, best[..., None, None].expand(b, k, a, 1, m)).squeeze(3)
+        best = torch.einsum("bkm,bhacm->bhkac", prefs, v).argmax(dim=4)  # (B, H, K, A)
+        return v.unsqueeze(2).expand(b, h, k, a, c, m).gather(
+            4, best[..., None, None].expand(b, h, k, a, 1, m)).squeeze(4)
+
+    @staticmethod
+    def pessimistic(q: torch.Tensor, prefs: torch.Tensor) -> torch.Tensor:
+        """Maxmin over heads: ``q (B, H, K, A, m)``, ``prefs (B, K, m)`` -> ``(B, K, A, m)``, per (row, preference,
+        action) the head with the lowest scalarised value."""
+        if q.shape[1] == 1:
+            return q[:, 0]
+        b, h, k, a, m = q.shape
+        worst = torch.einsum("bkm,bhkam->bhka", prefs, q).argmin(dim=1, keepdim=True)  # (B, 1, K, A)
+        return q.gather(1, worst[..., None].expand(b, 1, k, a, m)).squeeze(1)
 
     def forward(self, obs: torch.Tensor, pref: torch.Tensor) -> torch.Tensor:
         """``(R, |A|, m)`` Q-vectors of ``R`` observations, each under its own preference ``(R, m)``."""
-        return self.select(self.components(obs), pref.unsqueeze(1)).squeeze(1)
+        return self.forward_prefs(obs, pref.unsqueeze(1)).squeeze(1)
 
     def forward_prefs(self, obs: torch.Tensor, prefs: torch.Tensor) -> torch.Tensor:
         """``(B, K, |A|, m)`` Q-vectors of each observation under K preferences; one network pass of ``B`` rows."""
-        return self.select(self.components(obs), prefs)
+        return self.pessimistic(self.select(self.components(obs), prefs), prefs)
 
 
 Q_HEADS = ("conditioned", "convex")
 
 
 def make_q_network(obs_space: gym.Space, n_actions: int, n_objectives: int, hidden: Sequence[int],
-                   obs_encoding: str, head: str = "conditioned", n_components: int = 12) -> nn.Module:
+                   obs_encoding: str, head: str = "conditioned", n_components: int = 12,
+                   n_critics: int = 1) -> nn.Module:
     """The Q-network of a config: :class:`QNetwork` (``conditioned``, the paper's) or :class:`ConvexQNetwork`."""
     if head == "convex":
-        return ConvexQNetwork(obs_space, n_actions, n_objectives, hidden, obs_encoding, n_components)
+        return ConvexQNetwork(obs_space, n_actions, n_objectives, hidden, obs_encoding, n_components, n_critics)
     return QNetwork(obs_space, n_actions, n_objectives, hidden, obs_encoding)
 
 

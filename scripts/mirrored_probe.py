@@ -1,9 +1,10 @@
 """Single-seed probes of the divergence on deep-sea-treasure-mirrored-v0 (seed 2 diverges by 8k steps with the
 defaults: overestimate 24.6 at 8k, 121.9 at 9k). Each probe changes one thing; 9k steps of a 20k-step run.
 
-    python scripts/mirrored_probe.py NAME '{"config_key": value}' [double-components] [--env ID] [--seed S]
+    python scripts/mirrored_probe.py NAME '{"config_key": value}' [double-components|act-target] [--env ID] [--seed S]
         [--steps N]
 
+``act-target`` (not in mope) acts and evaluates with the target network, the Polyak average of the online weights.
 ``double-components`` (not in mope): with the convex head, the target network picks its own best component
 (a max over C noisy vectors that double Q does not cover); this variant selects the component with the online
 network and reads it from the target network.
@@ -40,12 +41,26 @@ class DoubleComponents(MoPE):
         return losses.clip_targets(y, self._q_low_t, self._q_high_t) if c.clip_targets else y
 
 
+class ActTarget(MoPE):
+    """Acts and evaluates with the target network (the Polyak average of the online weights)."""
+
+    @torch.inference_mode()
+    def q_values(self, obs, prefs):
+        return self.target_net(self._tensor(obs), self._tensor(prefs)).cpu().numpy()
+
+    @torch.inference_mode()
+    def greedy_actions(self, obs, prefs):
+        w = self._tensor(prefs)
+        return torch.einsum("bm,bam->ba", w, self.target_net(self._tensor(obs), w)).argmax(dim=1).cpu().numpy()
+
+
 def option(flag: str, default: str) -> str:
     return sys.argv[sys.argv.index(flag) + 1] if flag in sys.argv else default
 
 
 name, overrides = sys.argv[1], json.loads(sys.argv[2])
-cls = DoubleComponents if "double-components" in sys.argv[3:] else MoPE
+cls = DoubleComponents if "double-components" in sys.argv[3:] else ActTarget if "act-target" in sys.argv[3:] \
+    else MoPE
 env_id, seed, steps = option("--env", "deep-sea-treasure-mirrored-v0"), int(option("--seed", "2")), \
     int(option("--steps", "9000"))
 cfg = Config.from_dict({"env_id": env_id, "algo": "mope", "seed": seed, "total_steps": 20000, **overrides})

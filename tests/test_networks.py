@@ -241,3 +241,16 @@ def test_maxmin_network_acts_on_the_minimum_of_its_heads() -> None:
     scal = (per_head * w[:, None, None]).sum(-1)  # (B, H, A)
     q = net(obs, w)
     torch.testing.assert_close((q * w[:, None]).sum(-1), scal.min(dim=1).values)
+
+
+def test_joint_encoding_gives_each_cell_its_own_indicator() -> None:
+    space = gym.spaces.Box(low=np.array([0, 1]), high=np.array([2, 4]), dtype=np.int64)  # 3 x 4 cells
+    enc = ObsEncoder(space, "joint")
+    assert enc.out_dim == 12
+    x = enc(torch.tensor([[0, 1], [0, 4], [2, 4], [1, 2], [9, -3]]))  # out-of-range clamps to the edge cells
+    torch.testing.assert_close(x.sum(1), torch.ones(5))
+    assert x.argmax(1).tolist() == [0, 3, 11, 5, 8]
+    with pytest.raises(EnvironmentError_, match="joint"):
+        ObsEncoder(gym.spaces.Box(low=0.0, high=1.0, shape=(2,), dtype=np.float32), "joint")
+    with pytest.raises(EnvironmentError_, match="at most"):
+        ObsEncoder(gym.spaces.Box(low=0, high=1000, shape=(2,), dtype=np.int64), "joint")

@@ -33,7 +33,7 @@ ALGOS: dict[str, tuple[bool, bool]] = {
 }
 
 ENVELOPE_PREFS = ("relabel", "batch", "both", "own")
-ENCODINGS = ("scale", "onehot", "auto")
+ENCODINGS = ("scale", "onehot", "joint", "auto")
 Q_HEADS = ("conditioned", "convex")
 DEVICES = ("cpu", "cuda", "auto")
 
@@ -167,7 +167,8 @@ class Config:
     max_episode_steps: int | None = None
 
     #: How observations enter the networks: "scale" (a bounded Box to [0, 1]: the paper's (x, y) input),
-    #: "onehot" (each coordinate of an integer Box one-hot encoded), or "auto" (onehot for a small integer Box,
+    #: "onehot" (each coordinate of an integer Box one-hot encoded), "joint" (the whole cell of a small integer Box
+    #: one-hot encoded: no features shared between states), or "auto" (onehot for a small integer Box,
     #: else scale).
     obs_encoding: str = "auto"
 

@@ -21,9 +21,11 @@ import numpy as np
 import torch
 from torch import nn
 
+from mope.config import ENCODINGS
 from mope.errors import EnvironmentError_
 
-ENCODINGS = ("scale", "onehot", "auto")
+#: "joint" one-hot encodes the whole cell of an integer Box; it refuses a Box with more cells than this.
+JOINT_MAX = 65_536
 #: "auto" one-hot encodes an integer Box whose coordinates take at most this many values in all.
 AUTO_ONEHOT_MAX = 1024
 
@@ -45,7 +47,8 @@ class ObsEncoder(nn.Module):
     """Flat float features of an observation from a ``Box`` or ``Discrete`` space.
 
     ``encoding="scale"`` (default) scales a bounded ``Box`` to [0, 1]; ``"onehot"`` one-hot encodes each
-    coordinate of an integer ``Box`` with finite bounds (e.g. DST's (row, col) becomes 12 + 12 indicators).
+    coordinate of an integer ``Box`` with finite bounds (e.g. DST's (row, col) becomes 12 + 12 indicators);
+    ``"joint"`` one-hot encodes the whole cell (12 x 12 indicators: no features shared between states).
     A ``Discrete`` space is always one-hot encoded.
     """
 
@@ -56,18 +59,23 @@ class ObsEncoder(nn.Module):
         encoding = resolve_encoding(space, encoding)
         if encoding not in ENCODINGS:
             raise EnvironmentError_(f"obs_encoding '{encoding}' is unknown; choose one of {', '.join(ENCODINGS)}")
-        if (encoding == "onehot" and isinstance(space, gym.spaces.Box)
+        if (encoding in ("onehot", "joint") and isinstance(space, gym.spaces.Box)
                 and not np.issubdtype(space.dtype, np.integer)):
-            raise EnvironmentError_(f"obs_encoding 'onehot' needs an integer Box observation, got {space}")
-        if encoding == "onehot" and isinstance(space, gym.spaces.Box):
-            self.kind = "box_onehot"
+            raise EnvironmentError_(f"obs_encoding '{encoding}' needs an integer Box observation, got {space}")
+        if encoding in ("onehot", "joint") and isinstance(space, gym.spaces.Box):
+            self.kind = "box_onehot" if encoding == "onehot" else "box_joint"
             low = np.asarray(space.low, dtype=np.int64).reshape(-1)
             high = np.asarray(space.high, dtype=np.int64).reshape(-1)
             sizes = high - low + 1
             self.sizes = [int(x) for x in sizes]
-            self.out_dim = int(sizes.sum())
+            self.out_dim = int(sizes.sum()) if encoding == "onehot" else int(np.prod(sizes))
+            if encoding == "joint" and self.out_dim > JOINT_MAX:
+                raise EnvironmentError_(f"obs_encoding 'joint' would need {self.out_dim} inputs for {space} (at "
+                                        f"most {JOINT_MAX}); use 'onehot' or 'scale'")
             self.register_buffer("low", torch.as_tensor(low, dtype=torch.int64))
             self.register_buffer("scale", torch.as_tensor(sizes, dtype=torch.int64))
+            strides = np.concatenate([np.cumprod(sizes[::-1])[::-1][1:], [1]]) if sizes.size else sizes
+            self.register_buffer("strides", torch.as_tensor(strides, dtype=torch.int64))
         elif isinstance(space, gym.spaces.Discrete):
             self.kind = "discrete"
             self.n = int(space.n)
@@ -95,9 +103,11 @@ class ObsEncoder(nn.Module):
         """Encode a batch of raw observations ``(B, ...)`` into ``(B, out_dim)`` floats."""
         if self.kind == "discrete":
             return nn.functional.one_hot(obs.long().reshape(-1) - self.start, self.n).float()
-        if self.kind == "box_onehot":
+        if self.kind in ("box_onehot", "box_joint"):
             idx = (obs.reshape(obs.shape[0], -1).long() - self.low).clamp_min(0)
             idx = torch.minimum(idx, self.scale - 1)
+            if self.kind == "box_joint":
+                return nn.functional.one_hot((idx * self.strides).sum(1), self.out_dim).float()
             return torch.cat([nn.functional.one_hot(idx[:, i], n) for i, n in enumerate(self.sizes)], dim=1).float()
         return (obs.reshape(obs.shape[0], -1).float() - self.low) / self.scale
 

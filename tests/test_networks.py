@@ -254,3 +254,10 @@ def test_joint_encoding_gives_each_cell_its_own_indicator() -> None:
         ObsEncoder(gym.spaces.Box(low=0.0, high=1.0, shape=(2,), dtype=np.float32), "joint")
     with pytest.raises(EnvironmentError_, match="at most"):
         ObsEncoder(gym.spaces.Box(low=0, high=1000, shape=(2,), dtype=np.int64), "joint")
+
+
+def test_encoder_state_holds_only_what_earlier_checkpoints_hold() -> None:
+    """Checkpoints of mope 0.2.0 hold an encoder's ``low`` and ``scale`` only: a new saved buffer would make every
+    earlier checkpoint fail to load (``strides`` is derived from the space and not saved)."""
+    for encoding in ("onehot", "joint", "scale"):
+        assert set(ObsEncoder(DST_SPACE, encoding).state_dict()) == {"low", "scale"}

@@ -75,7 +75,7 @@ class ObsEncoder(nn.Module):
             self.register_buffer("low", torch.as_tensor(low, dtype=torch.int64))
             self.register_buffer("scale", torch.as_tensor(sizes, dtype=torch.int64))
             strides = np.concatenate([np.cumprod(sizes[::-1])[::-1][1:], [1]]) if sizes.size else sizes
-            self.register_buffer("strides", torch.as_tensor(strides, dtype=torch.int64))
+            self.register_buffer("strides", torch.as_tensor(strides, dtype=torch.int64), persistent=False)
         elif isinstance(space, gym.spaces.Discrete):
             self.kind = "discrete"
             self.n = int(space.n)

@@ -180,10 +180,12 @@ class Config:
     #: C, return vectors per action of the convex head.
     n_components: int = 12
     #: H, heads of the convex head whose minimum is Q (Maxmin Q-learning, Lan et al. 2020); 1: a single head.
+    #: The conditioned head has one head whatever this says.
     n_critics: int = 1
     #: Weight of the convex head's component loss (each target also trains its nearest component).
     component_loss_weight: float = 1.0
-    #: Within the component loss, weight of the pull of every component toward its nearest target (0: off).
+    #: Within the convex head's component loss, weight of the pull of every component toward its nearest target
+    #: (0: off).
     component_anchor_weight: float = 0.0
     hidden_sizes: tuple[int, ...] = (256, 256, 256)
     learning_rate: float = 3e-4

@@ -13,6 +13,7 @@ rebuilt that way loads only with ``env=`` given, and says so.
 from __future__ import annotations
 
 import dataclasses
+import json
 from pathlib import Path
 from typing import Any
 
@@ -46,10 +47,11 @@ def env_recipe(env: gym.Env) -> dict[str, Any]:
     unrecorded = [w.name for w in spec.additional_wrappers if w.kwargs is None]
     if unrecorded:
         return {"spec": None, "why": f"its wrapper {unrecorded[0]} does not record its arguments"}
-    # Keyword arguments that are the registration's own (MO-Gymnasium registers the mirrored DST map as a numpy
-    # array, which JSON cannot hold) are saved by name and taken from the registry again on load.
+    # Keyword arguments that JSON cannot hold but that are the registration's own (MO-Gymnasium registers the
+    # mirrored DST map as a numpy array) are saved by name and taken from the registry again on load.
     registered = _registered_kwargs(spec)
-    same = sorted(k for k, v in spec.kwargs.items() if k in registered and _same(v, registered[k]))
+    same = sorted(k for k, v in spec.kwargs.items()
+                  if not _jsonable(v) and k in registered and _same(v, registered[k]))
     try:
         return {"spec": dataclasses.replace(spec, kwargs={k: v for k, v in spec.kwargs.items() if k not in same})
                 .to_json(), "registered_kwargs": same}
@@ -62,6 +64,14 @@ def _registered_kwargs(spec: gym.envs.registration.EnvSpec) -> dict[str, Any]:
         return dict(gym.spec(spec.id).kwargs)
     except Exception:  # noqa: BLE001 - an unregistered id: nothing to take from the registry
         return {}
+
+
+def _jsonable(value: Any) -> bool:
+    try:
+        json.dumps(value)
+    except (TypeError, ValueError):
+        return False
+    return True
 
 
 def _same(a: Any, b: Any) -> bool:

@@ -264,8 +264,9 @@ class MoPE(BaseAgent):
         if isinstance(self.q_net, ConvexQNetwork):  # every head learns the same targets (rows b*H + h)
             comps = self.q_net.components(obs)  # (B, H, A, C, m)
             heads = comps.shape[1]
+            q_all = self.q_net.select(comps, w).flatten(0, 1)  # (B*H, N, A, m)
             actions, w, y = (t.repeat_interleave(heads, dim=0) for t in (actions, w, y))
-            q = losses.taken_action_q(self.q_net.select(comps, w[::heads]).flatten(0, 1), actions)
+            q = losses.taken_action_q(q_all, actions)
             comp_loss = losses.component_loss(comps.flatten(0, 1)[torch.arange(len(actions)), actions], y,
                                               c.component_anchor_weight)
         else:

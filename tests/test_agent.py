@@ -207,3 +207,35 @@ def test_maxmin_heads_train_save_and_load(tmp_path):
     assert back.config.n_critics == 2
     obs, w = np.array([[0, 0], [2, 1]]), np.array([[0.2, 0.8], [0.7, 0.3]])
     np.testing.assert_array_equal(back.q_values(obs, w), agent.q_values(obs, w))
+
+
+def test_reward_scale_scales_the_targets_and_reports_q_in_the_environments_units():
+    """An agent learning on rewards x 2 whose networks output 2x another's Q: its targets are exactly 2x the other's
+    (the clamp included), while the Q-values it reports and its greedy actions are the other's."""
+    base = {**SMALL, "per": False, "seed": 3}
+    a, b = MoPE("deep-sea-treasure-v0", **base), MoPE("deep-sea-treasure-v0", **base, reward_scale=2.0)
+    a.train(200)
+    for net_a, net_b in ((a.q_net, b.q_net), (a.target_net, b.target_net)):
+        net_b.load_state_dict(net_a.state_dict())
+        last = [m for m in net_b.modules() if isinstance(m, torch.nn.Linear)][-1]
+        with torch.no_grad():
+            last.weight.mul_(2.0)
+            last.bias.mul_(2.0)
+    batch = a.buffer.sample(32, np.random.default_rng(0), 1.0)
+    w = a._tensor(a.relabel(batch.prefs))
+    acting = a._tensor(batch.prefs)
+    y_a, y_b = a._envelope_target(batch, w, acting), b._envelope_target(batch, w, acting)
+    assert y_a.abs().max() > 0.5
+    torch.testing.assert_close(y_b, 2.0 * y_a)
+    obs = np.array([[0, 0], [2, 1], [5, 3]])
+    prefs = np.array([[0.2, 0.8], [0.7, 0.3], [0.95, 0.05]])
+    np.testing.assert_allclose(b.q_values(obs, prefs), a.q_values(obs, prefs), rtol=1e-5, atol=1e-5)
+    np.testing.assert_array_equal(b.greedy_actions(obs, prefs), a.greedy_actions(obs, prefs))
+    b.buffer = a.buffer
+    stats = b.update()
+    assert np.isfinite(stats["q_mean"])
+
+
+def test_reward_scale_must_be_positive():
+    with pytest.raises(mope.ConfigError, match="reward_scale=-1"):
+        MoPE("deep-sea-treasure-v0", reward_scale=-1.0)

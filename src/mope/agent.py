@@ -76,12 +76,15 @@ def cosine_schedule(start: float, end: float, duration: int, step: int) -> float
 
 
 def update_statistics(loss: torch.Tensor, parts: dict[str, torch.Tensor], td: torch.Tensor, q: torch.Tensor,
-                      w: torch.Tensor, bonus: torch.Tensor | None, disc_loss: float | None) -> dict[str, float]:
+                      w: torch.Tensor, bonus: torch.Tensor | None, disc_loss: float | None,
+                      reward_scale: float = 1.0) -> dict[str, float]:
     """What one update reports: the loss and its parts, |TD| (eq. 5), the scalarised Q of the taken actions,
-    the MI bonus (eq. 6) and the discriminator's loss."""
-    q_scal = (w * q).sum(-1)
+    the MI bonus (eq. 6) and the discriminator's loss. |TD| and Q are in the environment's units (divided by
+    ``reward_scale``); the losses are in the learner's."""
+    q_scal = (w * q).sum(-1) / reward_scale
     stats = {"loss": loss.item(), **{k: v.mean().item() for k, v in parts.items()},
-             "td_abs": td.abs().mean().item(), "q_mean": q_scal.mean().item(), "q_max": q_scal.max().item()}
+             "td_abs": td.abs().mean().item() / reward_scale, "q_mean": q_scal.mean().item(),
+             "q_max": q_scal.max().item()}
     if bonus is not None and disc_loss is not None:
         stats["disc_loss"] = disc_loss
         stats["mi_bonus"] = bonus.mean().item()
@@ -155,8 +158,9 @@ class MoPE(BaseAgent):
                                                    foreach=True)
 
         self.q_low, self.q_high = return_bounds(self.env, cfg.gamma)
-        self._q_low_t = torch.as_tensor(self.q_low, dtype=torch.float32, device=self.device)
-        self._q_high_t = torch.as_tensor(self.q_high, dtype=torch.float32, device=self.device)
+        # The targets' clamp, in the learner's units (rewards times reward_scale).
+        self._q_low_t = torch.as_tensor(self.q_low * cfg.reward_scale, dtype=torch.float32, device=self.device)
+        self._q_high_t = torch.as_tensor(self.q_high * cfg.reward_scale, dtype=torch.float32, device=self.device)
         obs_dtype = np.float32 if not isinstance(spec.obs_space, gym.spaces.Discrete) else np.int64
         self.buffer = ReplayBuffer(cfg.buffer_size, self.obs_shape, self.m, cfg.per, obs_dtype)
         self.global_step = 0
@@ -252,7 +256,7 @@ class MoPE(BaseAgent):
         td = losses.preference_interval_td(q.detach(), y, w)                                      # 5: eq. 5
         bonus, disc_loss = self._discriminator_step(obs, batch.prefs)                              # 5: eq. 6
         self._set_priorities(batch, losses.priority(td, bonus, c.mi_alpha, c.per_eps, c.per_alpha))  # 5: eq. 7
-        self.last_losses = update_statistics(loss, parts, td, q.detach(), w, bonus, disc_loss)
+        self.last_losses = update_statistics(loss, parts, td, q.detach(), w, bonus, disc_loss, c.reward_scale)
         return self.last_losses
 
     def _eql_loss(self, obs: torch.Tensor, actions: torch.Tensor, w: torch.Tensor, y: torch.Tensor
@@ -300,9 +304,18 @@ class MoPE(BaseAgent):
         env_prefs, envelope = losses.envelope_set(c.envelope_prefs, w, acting)
         q_next = self.target_net.forward_prefs(next_obs, env_prefs)
         q_select = self.q_net.forward_prefs(next_obs, env_prefs) if c.double_q else None
-        y = losses.envelope_target(q_next, self._tensor(batch.rewards), self._tensor(batch.terminated), w, c.gamma,
+        rewards = self._tensor(batch.rewards)
+        if c.reward_scale != 1.0:
+            rewards = rewards * c.reward_scale
+        y = losses.envelope_target(q_next, rewards, self._tensor(batch.terminated), w, c.gamma,
                                    q_select=q_select, envelope=envelope)
         return losses.clip_targets(y, self._q_low_t, self._q_high_t) if c.clip_targets else y
+
+    @torch.inference_mode()
+    def q_values(self, obs: np.ndarray, prefs: np.ndarray) -> np.ndarray:
+        """Vector Q-values ``(n, |A|, m)`` for a batch, in the environment's units (no input checks)."""
+        q = super().q_values(obs, prefs)
+        return q if self.config.reward_scale == 1.0 else q / self.config.reward_scale
 
     def _gradient_step(self, loss: torch.Tensor) -> None:
         self.optimizer.zero_grad(set_to_none=True)

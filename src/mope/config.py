@@ -58,7 +58,7 @@ PRESETS: dict[str, dict[str, Any]] = {
 
 #: Fields added after mope 0.2.0, with the values that reproduce the runs saved before them: a saved config (it has
 #: every other field) that lacks them is read with these values, not with today's defaults.
-LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0}
+LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0, "reward_scale": 1.0}
 
 
 def check_preset(name: str) -> str:
@@ -174,6 +174,9 @@ class Config:
 
     # --- EQL core (paper eq. 4; Yang et al. 2019) ------------------------------------------------------------
     gamma: float = 0.99
+    #: Rewards are multiplied by this one constant before they enter the targets (every objective alike, so every
+    #: greedy action is unchanged); Q-values are reported in the environment's units. 1: off.
+    reward_scale: float = 1.0
     #: Q-network head: "conditioned" (the paper: omega is an input, one vector per action and objective) or
     #: "convex" (C return vectors per action; Q(s, a, w) is the one w prefers: mope.networks.ConvexQNetwork).
     q_head: str = "convex"
@@ -307,7 +310,8 @@ class Config:
         for name in ("hidden_sizes", "disc_hidden"):
             need(len(getattr(self, name)) >= 1 and all(h >= 1 for h in getattr(self, name)), name,
                  "must be one or more positive layer widths")
-        for name in ("learning_rate", "disc_learning_rate", "sigma_omega", "per_eps", "pe_count_offset"):
+        for name in ("learning_rate", "disc_learning_rate", "sigma_omega", "per_eps", "pe_count_offset",
+                     "reward_scale"):
             need(_finite(getattr(self, name)) and getattr(self, name) > 0, name, "must be > 0")
         for name in ("batch_size", "gradient_steps", "target_update_freq", "epsilon_decay_steps", "n_omega",
                      "n_intervals", "n_components", "n_critics"):

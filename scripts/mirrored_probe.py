@@ -1,8 +1,8 @@
 """Single-seed probes of the divergence on deep-sea-treasure-mirrored-v0 (seed 2 diverges by 8k steps with the
 defaults: overestimate 24.6 at 8k, 121.9 at 9k). Each probe changes one thing; 9k steps of a 20k-step run.
 
-    python scripts/mirrored_probe.py NAME '{"config_key": value}' [double-components|act-target] [--env ID] [--seed S]
-        [--steps N]
+    python scripts/mirrored_probe.py NAME '{"config_key": value}' [double-components|act-target|--beta B] [--env ID]
+        [--seed S] [--steps N]
 
 ``act-target`` (not in mope) acts and evaluates with the target network, the Polyak average of the online weights.
 ``double-components`` (not in mope): with the convex head, the target network picks its own best component
@@ -13,6 +13,7 @@ import json
 import sys
 import time
 
+import numpy as np
 import torch
 
 from mope import losses
@@ -54,13 +55,40 @@ class ActTarget(MoPE):
         return torch.einsum("bm,bam->ba", w, self.target_net(self._tensor(obs), w)).argmax(dim=1).cpu().numpy()
 
 
+class CountPessimism(MoPE):
+    """Lowers the next state's value in every target by ``beta / sqrt(N(s'))`` on every objective (N: visits of s'
+    so far), so the bias of the max cannot compound in rarely visited states and cycles (not in mope)."""
+
+    beta = 1.0
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._visits: dict[tuple, int] = {}
+        add = self.buffer.add
+
+        def counted_add(obs, pref, action, reward, next_obs, terminated):
+            key = tuple(np.asarray(next_obs).reshape(-1).tolist())
+            self._visits[key] = self._visits.get(key, 0) + 1
+            add(obs, pref, action, reward, next_obs, terminated)
+
+        self.buffer.add = counted_add
+
+    def _envelope_target(self, batch, w, acting):
+        y = super()._envelope_target(batch, w, acting)
+        n = np.array([self._visits.get(tuple(o.reshape(-1).tolist()), 1) for o in batch.next_obs], dtype=np.float32)
+        live = 1.0 - self._tensor(batch.terminated).float()
+        pen = self.config.gamma * self.beta * live / torch.sqrt(self._tensor(n))
+        return y - pen.view(-1, *([1] * (y.dim() - 1)))
+
+
 def option(flag: str, default: str) -> str:
     return sys.argv[sys.argv.index(flag) + 1] if flag in sys.argv else default
 
 
 name, overrides = sys.argv[1], json.loads(sys.argv[2])
-cls = DoubleComponents if "double-components" in sys.argv[3:] else ActTarget if "act-target" in sys.argv[3:] \
-    else MoPE
+CountPessimism.beta = float(option("--beta", "1"))
+variants = {"--beta": CountPessimism, "double-components": DoubleComponents, "act-target": ActTarget}
+cls = next((v for flag, v in variants.items() if flag in sys.argv[3:]), MoPE)
 env_id, seed, steps = option("--env", "deep-sea-treasure-mirrored-v0"), int(option("--seed", "2")), \
     int(option("--steps", "9000"))
 cfg = Config.from_dict({"env_id": env_id, "algo": "mope", "seed": seed, "total_steps": 20000, **overrides})

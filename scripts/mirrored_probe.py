@@ -81,13 +81,76 @@ class CountPessimism(MoPE):
         return y - pen.view(-1, *([1] * (y.dim() - 1)))
 
 
+class GreedyReturns(MoPE):
+    """Mixes, into the acting preference's row of each target, the return the behaviour actually got from s'
+    (Watkins-style: the episode's rewards while its actions were greedy, then the target network's value where a
+    random action cut the trace, or where the time limit ended it). Only returns stored within the last ``window``
+    steps are used (greedy tails of old policies are stale). Not in mope.
+
+    y_row0 = (1 - lam) * y_row0 + lam * G
+    """
+
+    lam, window = 0.5, 2000
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        cap = self.buffer.capacity
+        self._G = np.zeros((cap, self.m), dtype=np.float32)
+        self._G_step = np.full(cap, -10**9, dtype=np.int64)
+        self._ep: list[tuple[int, np.ndarray, bool, np.ndarray]] = []
+
+    def collect_step(self):
+        if self._obs is None:
+            self._start_episode()
+        obs, pref = self._obs, self._pref
+        slot = self.buffer.pos
+        action = self.act(obs, pref, greedy=False)
+        greedy = int(self.greedy_actions(np.asarray(obs)[None], np.asarray(pref)[None])[0]) == action
+        next_obs, reward, terminated, truncated, _ = self.env.step(action)
+        self.buffer.add(obs, pref, action, np.asarray(reward, dtype=np.float32), next_obs, terminated)
+        self._ep.append((slot, np.asarray(reward, dtype=np.float32), greedy, np.asarray(next_obs)))
+        self._obs = next_obs
+        self._episode_actions.append(action)
+        self.global_step += 1
+        if terminated or truncated:
+            self._close_episode(terminated)
+            self.episodes += 1
+            self._start_episode()
+
+    @torch.no_grad()
+    def _close_episode(self, terminated):
+        w = self._tensor(self._pref)[None]
+        nxt = self._tensor(np.stack([e[3] for e in self._ep]))
+        q = self.target_net(nxt, w.expand(len(nxt), -1))  # (T, A, m)
+        v = q[torch.arange(len(nxt)), torch.einsum("m,tam->ta", w[0], q).argmax(1)].cpu().numpy()  # V(s_{t+1})
+        cur = np.zeros(self.m, dtype=np.float32) if terminated else v[-1]
+        for t in range(len(self._ep) - 1, -1, -1):
+            slot, r, _, _ = self._ep[t]
+            g = r + self.config.gamma * cur
+            self._G[slot], self._G_step[slot] = g, self.global_step
+            # the value at s_t for the step before: the return if a_t was greedy, else the target's value at s_t
+            cur = g if self._ep[t][2] else (v[t - 1] if t > 0 else g)
+        self._ep = []
+
+    def _envelope_target(self, batch, w, acting):
+        y = super()._envelope_target(batch, w, acting)
+        fresh = (self.global_step - self._G_step[batch.indices]) < self.window
+        if fresh.any():
+            idx = torch.as_tensor(np.flatnonzero(fresh))
+            g = self._tensor(self._G[batch.indices[fresh]])
+            y[idx, 0] = (1 - self.lam) * y[idx, 0] + self.lam * g
+        return y
+
+
 def option(flag: str, default: str) -> str:
     return sys.argv[sys.argv.index(flag) + 1] if flag in sys.argv else default
 
 
 name, overrides = sys.argv[1], json.loads(sys.argv[2])
 CountPessimism.beta = float(option("--beta", "1"))
-variants = {"--beta": CountPessimism, "double-components": DoubleComponents, "act-target": ActTarget}
+GreedyReturns.lam = float(option("--lam", "0.5"))
+GreedyReturns.window = int(option("--window", "2000"))
+variants = {"--lam": GreedyReturns, "--beta": CountPessimism, "double-components": DoubleComponents, "act-target": ActTarget}
 cls = next((v for flag, v in variants.items() if flag in sys.argv[3:]), MoPE)
 env_id, seed, steps = option("--env", "deep-sea-treasure-mirrored-v0"), int(option("--seed", "2")), \
     int(option("--steps", "9000"))

@@ -239,3 +239,32 @@ def test_reward_scale_scales_the_targets_and_reports_q_in_the_environments_units
 def test_reward_scale_must_be_positive():
     with pytest.raises(mope.ConfigError, match="reward_scale=-1"):
         MoPE("deep-sea-treasure-v0", reward_scale=-1.0)
+
+
+def test_return_mix_pulls_a_looping_states_target_to_what_the_loop_returns():
+    """A greedy policy that bumps the seabed's wall forever: with an inflated value at s' the envelope target
+    of eq. 4 is inflated too; return_mix blends in the loop's own return (time-limited), so the target of the
+    acting preference's row drops toward the truth, and only for fresh returns."""
+    agent = MoPE("deep-sea-treasure-v0", **{**SMALL, "per": False, "seed": 0}, return_mix=1.0, return_window=50)
+    inflate = [m for m in agent.target_net.modules() if isinstance(m, torch.nn.Linear)][-1]
+    with torch.no_grad():  # every component of every action worth (30, 0) at every state
+        inflate.weight.zero_()
+        inflate.bias.copy_(torch.tensor([30.0, 0.0]).repeat(inflate.bias.numel() // 2))
+    pref = np.array([0.9, 0.1])
+    agent._pref, agent._episode_slots, agent._episode_greedy = pref, [], []
+    for _ in range(40):  # a time-limited loop: bump into the left wall at the start (reward (0, -1))
+        agent._episode_slots.append(agent.buffer.pos)
+        agent._episode_greedy.append(True)
+        agent.buffer.add(np.array([0, 0]), pref, 2, np.array([0.0, -1.0]), np.array([0, 0]), False)
+    agent.global_step = 40
+    agent.store_episode_returns(terminated=False)
+    batch = agent.buffer.sample(8, np.random.default_rng(0))
+    batch.indices[:] = 0  # the loop's first step: 40 steps of (0, -1), then the inflated (30, 0) discounted
+    w = agent._tensor(agent.relabel(batch.prefs))
+    y = agent._envelope_target(batch, w, agent._tensor(batch.prefs))
+    expect = np.array([0.99 ** 40 * 30.0, -(1 - 0.99 ** 40) / 0.01])
+    np.testing.assert_allclose(y[:, 0].numpy(), np.tile(expect, (8, 1)), rtol=1e-4)
+    assert (y[:, 1:, 0] > 29.0).all()  # the other preferences' rows keep eq. 4's (inflated) target
+    agent.global_step = 40 + 50  # the return is now stale: eq. 4 alone
+    y_stale = agent._envelope_target(batch, w, agent._tensor(batch.prefs))
+    assert (y_stale[:, 0, 0] > 29.0).all()

@@ -14,6 +14,8 @@ from mope.losses import (
     envelope_set,
     envelope_target,
     eql_loss,
+    greedy_tail_returns,
+    mix_behaviour_returns,
     mutual_information_bonus,
     preference_interval_td,
     priority,
@@ -268,3 +270,26 @@ def test_component_loss_anchor_pulls_every_component_toward_its_nearest_target()
     # each target's nearest component is 0: (1 + 4) / 2; each component's nearest target: 0 -> 1, 10 -> 2: (1 + 64) / 2
     torch.testing.assert_close(component_loss(comps, y), torch.tensor([2.5]))
     torch.testing.assert_close(component_loss(comps, y, anchor_weight=0.5), torch.tensor([2.5 + 0.5 * 32.5]))
+
+
+def test_greedy_tail_returns_hand_values() -> None:
+    r = np.array([[0.0, -1.0], [0.0, -1.0], [5.0, -1.0]], dtype=np.float32)
+    v = np.array([[10.0, 0.0], [20.0, 0.0], [30.0, 0.0]], dtype=np.float32)  # V(s1), V(s2), V(s3)
+    all_greedy = greedy_tail_returns(r, v, np.array([True, True, True]), terminated=True, gamma=0.5)
+    np.testing.assert_allclose(all_greedy, [[1.25, -1.75], [2.5, -1.5], [5.0, -1.0]])
+    # a random action at step 1 cuts the trace: s1's value for step 0 is V(s1), not G_1
+    cut = greedy_tail_returns(r, v, np.array([True, False, True]), terminated=True, gamma=0.5)
+    np.testing.assert_allclose(cut, [[5.0, -1.0], [2.5, -1.5], [5.0, -1.0]])
+    # the time limit, not termination, ended it: the last step bootstraps from V(s3)
+    trunc = greedy_tail_returns(r, v, np.array([True, True, True]), terminated=False, gamma=0.5)
+    np.testing.assert_allclose(trunc[-1], [20.0, -1.0])
+    np.testing.assert_allclose(trunc[0], [0.0 + 0.5 * (0.0 + 0.5 * 20.0), -1.0 + 0.5 * (-1.0 + 0.5 * -1.0)])
+
+
+def test_mix_behaviour_returns_blends_only_the_own_row_of_fresh_transitions() -> None:
+    y = torch.arange(2 * 3 * 2, dtype=torch.float32).view(2, 3, 2)
+    g = torch.tensor([[100.0, 100.0], [-100.0, -100.0]])
+    out = mix_behaviour_returns(y, g, torch.tensor([True, False]), 0.25)
+    torch.testing.assert_close(out[0, 0], 0.75 * y[0, 0] + 25.0)
+    torch.testing.assert_close(out[0, 1:], y[0, 1:])
+    torch.testing.assert_close(out[1], y[1])

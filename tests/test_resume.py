@@ -37,8 +37,10 @@ def _metrics(run: Path) -> list[dict[str, str]]:
     return rows
 
 
-def test_agent_save_load_mid_episode_continues_identically(tmp_path):
-    cfg = Config.for_algo("mope", total_steps=400, learning_starts=50, n_omega=8, hidden_sizes=[32, 32], seed=5)
+@pytest.mark.parametrize("extra", [{}, {"return_mix": 0.5}], ids=["defaults", "return-mix"])
+def test_agent_save_load_mid_episode_continues_identically(tmp_path, extra):
+    cfg = Config.for_algo("mope", total_steps=400, learning_starts=50, n_omega=8, hidden_sizes=[32, 32], seed=5,
+                          **extra)
     ref = MoPE("deep-sea-treasure-v0", cfg)
     ref.train(400)
     a = MoPE("deep-sea-treasure-v0", cfg)
@@ -52,6 +54,9 @@ def test_agent_save_load_mid_episode_continues_identically(tmp_path):
     for p_ref, p_b in zip(ref.q_net.parameters(), b.q_net.parameters(), strict=True):
         assert np.array_equal(p_ref.detach().numpy(), p_b.detach().numpy())
     np.testing.assert_array_equal(ref.pref_sampler.counts, b.pref_sampler.counts)
+    if extra:  # the greedy-tail returns of the episode that spanned the checkpoint are the same too
+        np.testing.assert_array_equal(ref.buffer.return_steps, b.buffer.return_steps)
+        np.testing.assert_array_equal(ref.buffer.returns, b.buffer.returns)
 
 
 def test_train_run_resume_bookkeeping(tmp_path):

@@ -174,6 +174,9 @@ class MoPE(BaseAgent):
         self._obs: Any = None
         self._pref: np.ndarray | None = None
         self._episode_actions: list[int] = []
+        # ... and, with return_mix, its buffer slots and which of its actions were greedy.
+        self._episode_slots: list[int] = []
+        self._episode_greedy: list[bool] = []
         #: Statistics of the latest update (what :meth:`update` returned).
         self.last_losses: dict[str, float] = {}
         #: Solutions of the latest evaluation in :meth:`train` (uniform preference set), or None.
@@ -233,7 +236,10 @@ class MoPE(BaseAgent):
         b = len(acting_prefs)
         if not c.experience_exploration:
             shared = sample_simplex(c.n_omega, self.m, self.rng)
-            return np.repeat(shared[None], b, axis=0)
+            rows = np.repeat(shared[None], b, axis=0)
+            if c.return_mix:  # the row that learns the behaviour's return is the transition's own preference
+                rows[:, 0] = acting_prefs
+            return rows
         n_broad = min(c.n_omega - 1, round(c.n_omega * c.relabel_broad))
         near = sample_neighbours(acting_prefs, c.n_omega - 1 - n_broad, c.sigma_omega, self.rng)
         rows = [acting_prefs[:, None, :].astype(np.float64), near]
@@ -309,7 +315,28 @@ class MoPE(BaseAgent):
             rewards = rewards * c.reward_scale
         y = losses.envelope_target(q_next, rewards, self._tensor(batch.terminated), w, c.gamma,
                                    q_select=q_select, envelope=envelope)
-        return losses.clip_targets(y, self._q_low_t, self._q_high_t) if c.clip_targets else y
+        y = losses.clip_targets(y, self._q_low_t, self._q_high_t) if c.clip_targets else y
+        if c.return_mix:
+            fresh = self.global_step - self.buffer.return_steps[batch.indices] < c.return_window
+            y = losses.mix_behaviour_returns(y, self._tensor(self.buffer.returns[batch.indices]),
+                                             self._tensor(fresh, torch.bool), c.return_mix)
+        return y
+
+    @torch.no_grad()
+    def store_episode_returns(self, terminated: bool) -> None:
+        """At an episode's end: the greedy-tail return of each of its transitions under the episode's preference
+        (:func:`mope.losses.greedy_tail_returns`, values of the target network, learner's units), into the buffer."""
+        slots = np.asarray(self._episode_slots, dtype=np.int64)
+        if len(slots) == 0:
+            return
+        w = self._tensor(self._pref)[None].expand(len(slots), -1)
+        q = self.target_net(self._tensor(self.buffer.next_obs[slots]), w)  # (T, A, m)
+        best = torch.einsum("tm,tam->ta", w, q).argmax(dim=1)
+        values = q[torch.arange(len(slots), device=q.device), best].cpu().numpy()
+        returns = losses.greedy_tail_returns(self.buffer.rewards[slots] * self.config.reward_scale, values,
+                                             np.asarray(self._episode_greedy, dtype=bool), terminated,
+                                             self.config.gamma)
+        self.buffer.set_returns(slots, returns, self.global_step)
 
     @torch.inference_mode()
     def q_values(self, obs: np.ndarray, prefs: np.ndarray) -> np.ndarray:

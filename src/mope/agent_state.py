@@ -137,7 +137,9 @@ class AgentState:
                                for k, v in a.buffer.state_dict().items()}
             if a._pref is not None:
                 state["episode"] = {"pref": torch.as_tensor(a._pref),
-                                    "actions": torch.as_tensor(a._episode_actions, dtype=torch.int64)}
+                                    "actions": torch.as_tensor(a._episode_actions, dtype=torch.int64),
+                                    "slots": torch.as_tensor(a._episode_slots, dtype=torch.int64),
+                                    "greedy": torch.as_tensor(a._episode_greedy, dtype=torch.bool)}
             state["last_losses"] = dict(a.last_losses)
         return state
 
@@ -203,7 +205,11 @@ class AgentState:
                                       for k, v in data["buffer"].items()})
             a.last_losses = dict(data.get("last_losses", {}))
         if "episode" in data:
-            a._restore_episode(data["episode"]["pref"].numpy(), data["episode"]["actions"].tolist())
+            ep = data["episode"]
+            a._restore_episode(ep["pref"].numpy(), ep["actions"].tolist())
+            if "slots" in ep:  # checkpoints before return_mix have none
+                a._episode_slots = [int(i) for i in ep["slots"].tolist()]
+                a._episode_greedy = [bool(g) for g in ep["greedy"].tolist()]
 
     def _restore_episode(self, pref: np.ndarray, actions: list[int]) -> None:
         """Rebuild the episode in progress by replaying its actions from its seeded reset (no RNG draws)."""
@@ -213,6 +219,7 @@ class AgentState:
             a._obs, *_ = a.env.step(int(act))
         a._pref = np.asarray(pref, dtype=np.float64)
         a._episode_actions = [int(act) for act in actions]
+        a._episode_slots, a._episode_greedy = [], []
 
     def __repr__(self) -> str:
         a: Any = self

@@ -101,19 +101,31 @@ class BaseAgent(AgentState):
         obs, pref = self._obs, self._pref
         action = self.act(obs, pref, greedy=False)
         next_obs, reward, terminated, truncated, _ = self.env.step(action)
+        slot = self.buffer.pos
         self.buffer.add(obs, pref, action, np.asarray(reward, dtype=np.float32), next_obs, terminated)
         self._obs = next_obs
         self._episode_actions.append(action)
+        if self.config.return_mix:  # the trace of the episode's greedy tail (mope.losses.greedy_tail_returns)
+            self._episode_slots.append(slot)
+            self._episode_greedy.append(action == int(self.greedy_actions(np.asarray(obs)[None],
+                                                                          np.asarray(pref)[None])[0]))
         self.global_step += 1
         if terminated or truncated:
+            if self.config.return_mix:
+                self.store_episode_returns(bool(terminated))
             self.episodes += 1
             self._start_episode()
+
+    def store_episode_returns(self, terminated: bool) -> None:
+        """Hook: the episode that just ended is in ``_episode_slots`` / ``_episode_greedy`` (return_mix > 0)."""
 
     def _start_episode(self) -> None:
         """Reset the training env (seeded by the episode count) and draw the episode's preference."""
         self._obs, _ = self.env.reset(seed=self.config.seed + self.episodes)
         self._pref = self.pref_sampler.sample(self.rng)
         self._episode_actions = []
+        self._episode_slots: list[int] = []
+        self._episode_greedy: list[bool] = []
 
     def train(self, total_timesteps: int | None = None, eval_env: gym.Env | None = None,
               eval_every: int | None = None, callback: Any = None, progress: bool = False

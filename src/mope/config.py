@@ -58,7 +58,8 @@ PRESETS: dict[str, dict[str, Any]] = {
 
 #: Fields added after mope 0.2.0, with the values that reproduce the runs saved before them: a saved config (it has
 #: every other field) that lacks them is read with these values, not with today's defaults.
-LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0, "reward_scale": 1.0}
+LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0, "reward_scale": 1.0,
+                                "return_mix": 0.0, "return_window": 2_000}
 
 
 def check_preset(name: str) -> str:
@@ -203,6 +204,13 @@ class Config:
     target_update_freq: int = 100
     #: Polyak averaging of the target network at every step with this weight; None: the hard copy above.
     target_tau: float | None = 0.005
+    #: Weight of the behaviour's own return in the target of its own preference: the row of each transition's
+    #: acting preference is blended with the return the episode got from there along its greedy actions
+    #: (mope.losses.greedy_tail_returns); 0: off (eq. 4 alone). Without EE, the first relabeled row becomes the
+    #: acting preference.
+    return_mix: float = 0.0
+    #: Returns older than this many steps are not used (a stale greedy tail is an old policy's).
+    return_window: int = 2_000
     #: Weight of the auxiliary loss: L = L^A + lb_weight * L^B. The paper uses 1.
     lb_weight: float = 1.0
     #: Homotopy of Yang et al.: the weight of L^B rises linearly from 0 to lb_weight over this many steps (0: off).
@@ -304,6 +312,7 @@ class Config:
         need(self.target_tau is None or (_finite(self.target_tau) and 0 < self.target_tau <= 1), "target_tau",
              "must lie in (0, 1] or be None")
         need(_finite(self.relabel_broad) and 0 <= self.relabel_broad <= 1, "relabel_broad", "must lie in [0, 1]")
+        need(_finite(self.return_mix) and 0 <= self.return_mix <= 1, "return_mix", "must lie in [0, 1]")
         need(self.max_episode_steps is None or self.max_episode_steps >= 1, "max_episode_steps",
              "must be >= 1 or None")
         need(_finite(self.gamma) and 0.0 < self.gamma <= 1.0, "gamma", "must lie in (0, 1]")
@@ -314,7 +323,7 @@ class Config:
                      "reward_scale"):
             need(_finite(getattr(self, name)) and getattr(self, name) > 0, name, "must be > 0")
         for name in ("batch_size", "gradient_steps", "target_update_freq", "epsilon_decay_steps", "n_omega",
-                     "n_intervals", "n_components", "n_critics"):
+                     "n_intervals", "n_components", "n_critics", "return_window"):
             need(getattr(self, name) >= 1, name, "must be >= 1")
         need(self.buffer_size >= self.batch_size, "buffer_size", f"must be >= batch_size ({self.batch_size})")
         for name in ("learning_starts", "lb_homotopy_steps"):

@@ -71,6 +71,52 @@ def envelope_target(q_next: torch.Tensor, rewards: torch.Tensor, terminated: tor
     return rewards.unsqueeze(1) + gamma * (1.0 - terminated).view(b, 1, 1) * q_star
 
 
+def greedy_tail_returns(rewards: np.ndarray, next_values: np.ndarray, greedy: np.ndarray, terminated: bool,
+                        gamma: float) -> np.ndarray:
+    """Return of one finished episode from each step, along its greedy actions (Watkins' trace cut).
+
+    ``G_t = r_t + gamma * U_{t+1}``, where the value ``U_{t+1}`` of ``s_{t+1}`` is ``G_{t+1}`` if the action taken
+    there was the greedy one, else ``V(s_{t+1})`` (the trace is cut where a random action was taken); after the
+    last step it is 0 if the episode terminated and ``V(s_T)`` if the time limit ended it. So ``G_t`` is the
+    return of taking ``a_t`` and then following the greedy policy of the episode's own preference as far as the
+    episode did: a target for ``Q(s_t, a_t, w_episode)`` that a looping greedy policy cannot inflate.
+
+    Args:
+        rewards: ``(T, m)`` the episode's rewards.
+        next_values: ``(T, m)`` ``V(s_{t+1}) = Q(s_{t+1}, a*, w)`` under the episode's preference.
+        greedy: ``(T,)`` whether each action was the greedy one.
+        terminated: Whether the last step ended the episode (not the time limit).
+        gamma: Discount factor.
+
+    Returns:
+        ``(T, m)`` returns.
+    """
+    n = len(rewards)
+    out = np.empty_like(np.asarray(rewards, dtype=np.float32))
+    after = np.zeros(out.shape[1], dtype=np.float32) if terminated else np.asarray(next_values[-1], np.float32)
+    for t in range(n - 1, -1, -1):
+        out[t] = rewards[t] + gamma * after
+        after = out[t] if greedy[t] or t == 0 else np.asarray(next_values[t - 1], np.float32)
+    return out
+
+
+def mix_behaviour_returns(y: torch.Tensor, returns: torch.Tensor, fresh: torch.Tensor, weight: float) -> torch.Tensor:
+    """Blend the first row of each transition's targets (its own preference) with its greedy-tail return.
+
+    ``y[b, 0] <- (1 - weight) * y[b, 0] + weight * G_b`` where ``fresh[b]`` (G recent enough to be the current
+    greedy policy's); other rows and stale transitions keep the envelope target (eq. 4).
+
+    Args:
+        y: ``(B, N, m)`` targets; row 0 is the transition's own preference.
+        returns: ``(B, m)`` greedy-tail returns (:func:`greedy_tail_returns`).
+        fresh: ``(B,)`` bool.
+        weight: Blend weight in [0, 1].
+    """
+    mixed = y.clone()
+    mixed[:, 0] = torch.where(fresh[:, None], (1.0 - weight) * y[:, 0] + weight * returns, y[:, 0])
+    return mixed
+
+
 def clip_targets(y: torch.Tensor, low: torch.Tensor, high: torch.Tensor) -> torch.Tensor:
     """Clamp targets to the per-objective range of returns the reward bounds allow (not in the paper)."""
     return torch.maximum(torch.minimum(y, high), low)

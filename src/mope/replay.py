@@ -13,6 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+#: ``return_steps`` of a transition without a stored return.
+NO_RETURN = -(2**62)
+
 
 class SumTree:
     """Binary sum tree over ``capacity`` non-negative priorities (leaf ``i`` holds priority ``i``).
@@ -103,6 +106,10 @@ class ReplayBuffer:
         self.actions = np.zeros(capacity, dtype=np.int64)
         self.rewards = np.zeros((capacity, n_objectives), dtype=np.float32)
         self.terminated = np.zeros(capacity, dtype=np.float32)
+        #: Greedy-tail return of each transition under its own preference, and the step it was computed at
+        #: (``NO_RETURN``: none); written by :meth:`set_returns` when an episode ends.
+        self.returns = np.zeros((capacity, n_objectives), dtype=np.float32)
+        self.return_steps = np.full(capacity, NO_RETURN, dtype=np.int64)
         self.tree = SumTree(capacity) if prioritized else None
         self.max_priority = 1.0
         self.pos = 0
@@ -121,6 +128,7 @@ class ReplayBuffer:
         self.rewards[i] = reward
         self.next_obs[i] = next_obs
         self.terminated[i] = float(terminated)
+        self.return_steps[i] = NO_RETURN
         if self.tree is not None:
             self.tree.update(np.array([i]), np.array([self.max_priority]))
         self.pos = (i + 1) % self.capacity
@@ -146,6 +154,11 @@ class ReplayBuffer:
         return Batch(idx, self.obs[idx], self.prefs[idx], self.actions[idx], self.rewards[idx],
                      self.next_obs[idx], self.terminated[idx], weights)
 
+    def set_returns(self, idx: np.ndarray, returns: np.ndarray, step: int) -> None:
+        """Store the returns of a finished episode's transitions (slots ``idx``), computed at ``step``."""
+        self.returns[idx] = returns
+        self.return_steps[idx] = step
+
     def update_priorities(self, idx: np.ndarray, priorities: np.ndarray) -> None:
         """Set new priorities (already raised to alpha) for sampled indices."""
         if self.tree is None:
@@ -159,7 +172,8 @@ class ReplayBuffer:
         state = {
             "obs": self.obs[:n].copy(), "next_obs": self.next_obs[:n].copy(), "prefs": self.prefs[:n].copy(),
             "actions": self.actions[:n].copy(), "rewards": self.rewards[:n].copy(),
-            "terminated": self.terminated[:n].copy(), "pos": self.pos, "full": self.full,
+            "terminated": self.terminated[:n].copy(), "returns": self.returns[:n].copy(),
+            "return_steps": self.return_steps[:n].copy(), "pos": self.pos, "full": self.full,
             "max_priority": self.max_priority,
         }
         if self.tree is not None:
@@ -171,6 +185,9 @@ class ReplayBuffer:
         n = len(state["actions"])
         for key in ("obs", "next_obs", "prefs", "actions", "rewards", "terminated"):
             getattr(self, key)[:n] = np.asarray(state[key])
+        for key in ("returns", "return_steps"):  # absent from checkpoints before return_mix
+            if key in state:
+                getattr(self, key)[:n] = np.asarray(state[key])
         self.pos, self.full, self.max_priority = int(state["pos"]), bool(state["full"]), float(state["max_priority"])
         if self.tree is not None and "priorities" in state:
             self.tree.update(np.arange(n), np.asarray(state["priorities"]))

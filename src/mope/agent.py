@@ -322,28 +322,6 @@ class MoPE(BaseAgent):
                                              self._tensor(fresh, torch.bool), c.return_mix)
         return y
 
-    @torch.no_grad()
-    def store_episode_returns(self, terminated: bool) -> None:
-        """At an episode's end: the greedy-tail return of each of its transitions under the episode's preference
-        (:func:`mope.losses.greedy_tail_returns`, values of the target network, learner's units), into the buffer."""
-        slots = np.asarray(self._episode_slots, dtype=np.int64)
-        if len(slots) == 0:
-            return
-        w = self._tensor(self._pref)[None].expand(len(slots), -1)
-        q = self.target_net(self._tensor(self.buffer.next_obs[slots]), w)  # (T, A, m)
-        best = torch.einsum("tm,tam->ta", w, q).argmax(dim=1)
-        values = q[torch.arange(len(slots), device=q.device), best].cpu().numpy()
-        returns = losses.greedy_tail_returns(self.buffer.rewards[slots] * self.config.reward_scale, values,
-                                             np.asarray(self._episode_greedy, dtype=bool), terminated,
-                                             self.config.gamma)
-        self.buffer.set_returns(slots, returns, self.global_step)
-
-    @torch.inference_mode()
-    def q_values(self, obs: np.ndarray, prefs: np.ndarray) -> np.ndarray:
-        """Vector Q-values ``(n, |A|, m)`` for a batch, in the environment's units (no input checks)."""
-        q = super().q_values(obs, prefs)
-        return q if self.config.reward_scale == 1.0 else q / self.config.reward_scale
-
     def _gradient_step(self, loss: torch.Tensor) -> None:
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()

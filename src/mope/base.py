@@ -14,9 +14,11 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from mope import losses
 from mope.agent_state import AgentState
 from mope.errors import MopeError
 from mope.preferences import validate_preference
+from mope.replay import ReplayBuffer
 
 
 def linear_schedule(start: float, end: float, duration: int, step: int) -> float:
@@ -29,6 +31,8 @@ class BaseAgent(AgentState):
     """Acting, collection and the training entry point of a preference-conditioned Q agent."""
 
     q_net: torch.nn.Module
+    target_net: torch.nn.Module
+    buffer: ReplayBuffer
     n_actions: int
     m: int
     obs_shape: tuple[int, ...]
@@ -52,8 +56,10 @@ class BaseAgent(AgentState):
 
     @torch.inference_mode()
     def q_values(self, obs: np.ndarray, prefs: np.ndarray) -> np.ndarray:
-        """Vector Q-values ``(n, |A|, m)`` for a batch (no input checks; used by diagnostics)."""
-        return self.q_net(self._tensor(obs), self._tensor(prefs)).cpu().numpy()
+        """Vector Q-values ``(n, |A|, m)`` for a batch, in the environment's units (no input checks; used by
+        diagnostics)."""
+        q = self.q_net(self._tensor(obs), self._tensor(prefs)).cpu().numpy()
+        return q if self.config.reward_scale == 1.0 else q / self.config.reward_scale
 
     @torch.inference_mode()
     def greedy_actions(self, obs: np.ndarray, prefs: np.ndarray) -> np.ndarray:
@@ -116,8 +122,21 @@ class BaseAgent(AgentState):
             self.episodes += 1
             self._start_episode()
 
+    @torch.no_grad()
     def store_episode_returns(self, terminated: bool) -> None:
-        """Hook: the episode that just ended is in ``_episode_slots`` / ``_episode_greedy`` (return_mix > 0)."""
+        """At an episode's end: the greedy-tail return of each of its transitions under the episode's preference
+        (:func:`mope.losses.greedy_tail_returns`, values of the target network, learner's units), into the buffer."""
+        slots = np.asarray(self._episode_slots, dtype=np.int64)
+        if len(slots) == 0:
+            return
+        w = self._tensor(self._pref)[None].expand(len(slots), -1)
+        q = self.target_net(self._tensor(self.buffer.next_obs[slots]), w)  # (T, A, m)
+        best = torch.einsum("tm,tam->ta", w, q).argmax(dim=1)
+        values = q[torch.arange(len(slots), device=q.device), best].cpu().numpy()
+        returns = losses.greedy_tail_returns(self.buffer.rewards[slots] * self.config.reward_scale, values,
+                                             np.asarray(self._episode_greedy, dtype=bool), terminated,
+                                             self.config.gamma)
+        self.buffer.set_returns(slots, returns, self.global_step)
 
     def _start_episode(self) -> None:
         """Reset the training env (seeded by the episode count) and draw the episode's preference."""

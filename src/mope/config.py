@@ -175,8 +175,7 @@ class Config:
 
     # --- EQL core (paper eq. 4; Yang et al. 2019) ------------------------------------------------------------
     gamma: float = 0.99
-    #: Rewards are multiplied by this one constant before they enter the targets (every objective alike, so every
-    #: greedy action is unchanged); Q-values are reported in the environment's units. 1: off.
+    #: Rewards times this constant in the targets (all objectives alike: no greedy action changes); 1: off.
     reward_scale: float = 1.0
     #: Q-network head: "conditioned" (the paper: omega is an input, one vector per action and objective) or
     #: "convex" (C return vectors per action; Q(s, a, w) is the one w prefers: mope.networks.ConvexQNetwork).
@@ -204,12 +203,9 @@ class Config:
     target_update_freq: int = 100
     #: Polyak averaging of the target network at every step with this weight; None: the hard copy above.
     target_tau: float | None = 0.005
-    #: Weight of the behaviour's own return in the target of its own preference: the row of each transition's
-    #: acting preference is blended with the return the episode got from there along its greedy actions
-    #: (mope.losses.greedy_tail_returns); 0: off (eq. 4 alone). Without EE, the first relabeled row becomes the
-    #: acting preference.
+    #: Weight of the episode's greedy-tail return in the target row of its own preference (0: off; see
+    #: mope.losses.greedy_tail_returns); returns older than return_window steps are not used.
     return_mix: float = 0.0
-    #: Returns older than this many steps are not used (a stale greedy tail is an old policy's).
     return_window: int = 2_000
     #: Weight of the auxiliary loss: L = L^A + lb_weight * L^B. The paper uses 1.
     lb_weight: float = 1.0
@@ -311,8 +307,6 @@ class Config:
              "learning_rate_end", "must be > 0 or None")
         need(self.target_tau is None or (_finite(self.target_tau) and 0 < self.target_tau <= 1), "target_tau",
              "must lie in (0, 1] or be None")
-        need(_finite(self.relabel_broad) and 0 <= self.relabel_broad <= 1, "relabel_broad", "must lie in [0, 1]")
-        need(_finite(self.return_mix) and 0 <= self.return_mix <= 1, "return_mix", "must lie in [0, 1]")
         need(self.max_episode_steps is None or self.max_episode_steps >= 1, "max_episode_steps",
              "must be >= 1 or None")
         need(_finite(self.gamma) and 0.0 < self.gamma <= 1.0, "gamma", "must lie in (0, 1]")
@@ -332,7 +326,7 @@ class Config:
             need(_finite(getattr(self, name)) and getattr(self, name) >= 0, name, "must be >= 0")
         need(self.max_grad_norm is None or (_finite(self.max_grad_norm) and self.max_grad_norm > 0),
              "max_grad_norm", "must be > 0 or None")
-        for name in ("epsilon_start", "epsilon_end", "per_beta_start"):
+        for name in ("epsilon_start", "epsilon_end", "per_beta_start", "relabel_broad", "return_mix"):
             need(_finite(getattr(self, name)) and 0.0 <= getattr(self, name) <= 1.0, name, "must lie in [0, 1]")
         need(self.envelope_prefs in ENVELOPE_PREFS, "envelope_prefs", f"choose one of {', '.join(ENVELOPE_PREFS)}")
 

@@ -1,8 +1,8 @@
 """Single-seed probes of the divergence on deep-sea-treasure-mirrored-v0 (seed 2 diverges by 8k steps with the
 defaults: overestimate 24.6 at 8k, 121.9 at 9k). Each probe changes one thing; 9k steps of a 20k-step run.
 
-    python scripts/mirrored_probe.py NAME '{"config_key": value}' [double-components|act-target|--beta B] [--env ID]
-        [--seed S] [--steps N]
+    python scripts/mirrored_probe.py NAME '{"config_key": value}' [double-components|act-target|--beta B|--lam L]
+        [--env ID] [--seed S] [--steps N]
 
 ``act-target`` (not in mope) acts and evaluates with the target network, the Polyak average of the online weights.
 ``double-components`` (not in mope): with the convex head, the target network picks its own best component
@@ -150,7 +150,8 @@ name, overrides = sys.argv[1], json.loads(sys.argv[2])
 CountPessimism.beta = float(option("--beta", "1"))
 GreedyReturns.lam = float(option("--lam", "0.5"))
 GreedyReturns.window = int(option("--window", "2000"))
-variants = {"--lam": GreedyReturns, "--beta": CountPessimism, "double-components": DoubleComponents, "act-target": ActTarget}
+variants = {"--lam": GreedyReturns, "--beta": CountPessimism, "double-components": DoubleComponents,
+            "act-target": ActTarget}
 cls = next((v for flag, v in variants.items() if flag in sys.argv[3:]), MoPE)
 env_id, seed, steps = option("--env", "deep-sea-treasure-mirrored-v0"), int(option("--seed", "2")), \
     int(option("--steps", "9000"))

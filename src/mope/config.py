@@ -48,12 +48,12 @@ PRESETS: dict[str, dict[str, Any]] = {
     "paper": {"q_head": "conditioned", "obs_encoding": "scale", "hidden_sizes": [64, 128, 128, 64],
               "learning_rate": 1e-3, "learning_rate_end": None, "batch_size": 32, "target_tau": None,
               "target_update_freq": 100, "max_grad_norm": 10.0, "n_omega": 64, "relabel_broad": 0.0,
-              "envelope_prefs": "relabel"},
+              "envelope_prefs": "relabel", "return_mix": 0.0},
     "envelope": {"q_head": "conditioned", "obs_encoding": "scale", "hidden_sizes": [256, 256, 256, 256],
                  "learning_rate": 3e-4, "learning_rate_end": None, "batch_size": 64, "n_omega": 4,
                  "target_tau": None, "target_update_freq": 1000, "max_grad_norm": 0.1, "lb_homotopy_steps": 10_000,
                  "relabel_broad": 0.0, "envelope_prefs": "relabel", "clip_targets": False, "learning_starts": 100,
-                 "per_alpha": 0.6},
+                 "per_alpha": 0.6, "return_mix": 0.0},
 }
 
 #: Fields added after mope 0.2.0, with the values that reproduce the runs saved before them: a saved config (it has
@@ -204,8 +204,9 @@ class Config:
     #: Polyak averaging of the target network at every step with this weight; None: the hard copy above.
     target_tau: float | None = 0.005
     #: Weight of the episode's greedy-tail return in the target row of its own preference (0: off; see
-    #: mope.losses.greedy_tail_returns); returns older than return_window steps are not used.
-    return_mix: float = 0.0
+    #: mope.losses.greedy_tail_returns); returns older than return_window steps are not used. 0.5 by default since
+    #: docs/results/return-mix: it keeps the mirrored map from diverging and raises DST's optimal share.
+    return_mix: float = 0.5
     return_window: int = 2_000
     #: Weight of the auxiliary loss: L = L^A + lb_weight * L^B. The paper uses 1.
     lb_weight: float = 1.0

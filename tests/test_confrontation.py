@@ -308,6 +308,7 @@ def test_a_short_training_beats_random_red() -> None:
     _, disc, outcomes = play_reference("random", list(range(200)))
     random_loss = outcomes.count("blue_win") / len(outcomes)
     assert random_loss >= 0.8
-    # on the development machine, before return_mix: loss share 0.48 (4k steps: 0.68), r_catch -9.9 against random's -11.3
+    # on the development machine, before return_mix: loss share 0.48 (4k steps: 0.68), r_catch -9.9 against
+    # random's -11.3
     assert res["loss_share"] <= random_loss - 0.15, (res["loss_share"], random_loss)
     assert sols.discounted[:, 0].mean() >= disc[:, 0].mean() + 0.5, (sols.discounted[:, 0].mean(), disc[:, 0].mean())

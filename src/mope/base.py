@@ -88,11 +88,6 @@ class BaseAgent(AgentState):
             prefs = np.repeat(prefs, len(obs_b), axis=0)
         if len(prefs) != len(obs_b):
             raise MopeError(f"got {len(obs_b)} observations but {len(prefs)} preferences")
-        actions, _ = self._act_batch(obs_b, prefs, greedy)
-        return int(actions[0]) if single else actions
-
-    def _act_batch(self, obs_b: np.ndarray, prefs: np.ndarray, greedy: bool) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`act` on checked batches: the actions, and which rows explored (took a uniform random action)."""
         actions = np.zeros(len(obs_b), dtype=np.int64)
         explore = np.zeros(len(obs_b), dtype=bool)
         if not greedy:
@@ -100,7 +95,8 @@ class BaseAgent(AgentState):
             actions[explore] = self.rng.integers(0, self.n_actions, int(explore.sum()))
         if not explore.all():
             actions[~explore] = self.greedy_actions(obs_b[~explore], prefs[~explore])
-        return actions, explore
+        self._explored = explore  # which rows took a random action (collect_step's greedy-tail trace reads it)
+        return int(actions[0]) if single else actions
 
     # ---------------------------------------------------------------------------------------------------------
     # collection
@@ -110,9 +106,8 @@ class BaseAgent(AgentState):
         if self._obs is None:
             self._start_episode()
         obs, pref = self._obs, self._pref
-        obs_b, prefs = np.asarray(obs).reshape(1, *self.obs_shape), np.atleast_2d(validate_preference(pref, self.m))
-        actions, explored = self._act_batch(obs_b, prefs, greedy=False)
-        action = int(actions[0])
+        self._explored = None
+        action = self.act(obs, pref, greedy=False)
         next_obs, reward, terminated, truncated, _ = self.env.step(action)
         slot = self.buffer.pos
         self.buffer.add(obs, pref, action, np.asarray(reward, dtype=np.float32), next_obs, terminated)
@@ -120,8 +115,10 @@ class BaseAgent(AgentState):
         self._episode_actions.append(action)
         if self.config.return_mix:  # the trace of the episode's greedy tail (mope.losses.greedy_tail_returns)
             self._episode_slots.append(slot)
-            # greedy unless it explored; a random action equal to the greedy one keeps the trace too
-            self._episode_greedy.append(not explored[0] or action == int(self.greedy_actions(obs_b, prefs)[0]))
+            # greedy unless act() explored; a random action equal to the greedy one keeps the trace too
+            explored = self._explored is None or bool(self._explored[0])  # None: an act() that does not say
+            self._episode_greedy.append(not explored or action == int(self.greedy_actions(np.asarray(obs)[None],
+                                                                                          np.asarray(pref)[None])[0]))
         self.global_step += 1
         if terminated or truncated:
             if self.config.return_mix:

@@ -55,11 +55,14 @@ def test_act_single_and_batch_and_bad_preferences():
 
 
 def test_relabel_eql_is_uniform_and_shared_ee_is_local():
-    eql = EQL("deep-sea-treasure-v0", **SMALL)
+    eql = EQL("deep-sea-treasure-v0", **SMALL, return_mix=0.0)
     acting = np.array([[0.2, 0.8], [0.9, 0.1]])
     w = eql.relabel(acting)
     assert w.shape == (2, 8, 2)
     np.testing.assert_allclose(w[0], w[1])  # one uniform set for the whole batch (Yang et al.)
+    w = EQL("deep-sea-treasure-v0", **SMALL).relabel(acting)  # default return_mix: row 0 learns the behaviour's
+    np.testing.assert_allclose(w[:, 0], acting)  # return, so it is the transition's own preference
+    np.testing.assert_allclose(w[0, 1:], w[1, 1:])
     ee = mope.make_agent("ee", "deep-sea-treasure-v0", **SMALL, relabel_broad=0.0)  # the paper's EE
     w = ee.relabel(acting)
     assert w.shape == (2, 8, 2)

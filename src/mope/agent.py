@@ -228,9 +228,10 @@ class MoPE(BaseAgent):
     def relabel(self, acting_prefs: np.ndarray) -> np.ndarray:
         """Step 3: preferences of the training rows, ``(B, N_omega, m)``.
 
-        EQL: N_omega uniform preferences shared by the whole batch (Yang et al. 2019). EE (sec. 3, similar
-        preference exploration): the transition's own ``omega_b`` plus neighbours within sigma_omega; with
-        ``relabel_broad`` > 0, that share of the N_omega rows is drawn uniformly from the simplex instead.
+        EQL: N_omega uniform preferences shared by the whole batch (Yang et al. 2019); with ``return_mix`` (the
+        default) the first is the transition's own preference instead, the row that learns the behaviour's return.
+        EE (sec. 3, similar preference exploration): the transition's own ``omega_b`` plus neighbours within
+        sigma_omega; with ``relabel_broad`` > 0, that share of the N_omega rows is drawn uniformly from the simplex.
         """
         c = self.config
         b = len(acting_prefs)

@@ -236,8 +236,9 @@ def test_maxmin_heads_train_save_and_load(tmp_path):
 
 def test_reward_scale_scales_the_targets_and_reports_q_in_the_environments_units():
     """An agent learning on rewards x 2 whose networks output 2x another's Q: its targets are exactly 2x the other's
-    (the clamp included), while the Q-values it reports and its greedy actions are the other's."""
-    base = {**SMALL, "per": False, "seed": 3}
+    (the clamp included), while the Q-values it reports and its greedy actions are the other's. (return_mix off:
+    the batch comes from a's buffer, and b's buffer holds none of a's behaviour returns.)"""
+    base = {**SMALL, "per": False, "seed": 3, "return_mix": 0.0}
     a, b = MoPE("deep-sea-treasure-v0", **base), MoPE("deep-sea-treasure-v0", **base, reward_scale=2.0)
     a.train(200)
     for net_a, net_b in ((a.q_net, b.q_net), (a.target_net, b.target_net)):

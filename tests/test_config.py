@@ -123,6 +123,9 @@ def test_for_algo_contradiction() -> None:
         ({"seed": -1}, "seed", "-1"),
         ({"env_id": ""}, "env_id", "''"),
         ({"max_grad_norm": 0.0}, "max_grad_norm", "0.0"),
+        ({"return_mix": 1.5}, "return_mix", "1.5"),
+        ({"return_mix": float("nan")}, "return_mix", "nan"),
+        ({"return_window": 0}, "return_window", "0"),
         ({"ref_point": (0.0, float("nan"))}, "ref_point", "nan"),
     ],
 )

@@ -204,8 +204,8 @@ class Config:
     #: Polyak averaging of the target network at every step with this weight; None: the hard copy above.
     target_tau: float | None = 0.005
     #: Weight of the episode's greedy-tail return in the target row of its own preference (0: off; see
-    #: mope.losses.greedy_tail_returns); returns older than return_window steps are not used. 0.5 by default since
-    #: docs/results/return-mix: it keeps the mirrored map from diverging and raises DST's optimal share.
+    #: mope.losses.greedy_tail_returns); returns older than return_window steps are not used. Default 0.5: it keeps
+    #: the mirrored map from diverging and raises DST's optimal share (docs/results/return-mix).
     return_mix: float = 0.5
     return_window: int = 2_000
     #: Weight of the auxiliary loss: L = L^A + lb_weight * L^B. The paper uses 1.

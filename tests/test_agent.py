@@ -294,3 +294,52 @@ def test_return_mix_pulls_a_looping_states_target_to_what_the_loop_returns():
     agent.global_step = 40 + 50  # the return is now stale: eq. 4 alone
     y_stale = agent._envelope_target(batch, w, agent._tensor(batch.prefs))
     assert (y_stale[:, 0, 0] > 29.0).all()
+
+
+def _n_step_agent(**overrides):
+    agent = MoPE("deep-sea-treasure-v0", **{**SMALL, "per": False, "seed": 1, "return_mix": 0.0,
+                                            "clip_targets": False, **overrides})
+    agent.train(300)
+    batch = agent.buffer.sample(24, np.random.default_rng(2), 1.0)
+    return agent, batch, agent._tensor(agent.relabel(batch.prefs)), agent._tensor(batch.prefs)
+
+
+def test_n_step_target_of_one_step_is_eq4():
+    agent, batch, w, acting = _n_step_agent()
+    torch.testing.assert_close(agent._n_step_target(batch, w, acting, 1), agent._envelope_target(batch, w, acting))
+
+
+def test_two_step_target_follows_each_rows_own_greedy_action():
+    """n_step = 2 against a per-row reference: a row takes the second stored reward only where the stored action
+    there is the greedy one of its own preference (and the episode goes on); else it is eq. 4's one-step target."""
+    agent, batch, w, acting = _n_step_agent(n_step=2)
+    y = agent._envelope_target(batch, w, acting).numpy()
+    buf, g = agent.buffer, agent.config.gamma
+
+    def value(obs, pref):  # double Q at the row's own preference (envelope_prefs "own"): online picks, target reads
+        o, p = agent._tensor(obs[None]), agent._tensor(pref[None])
+        with torch.no_grad():
+            q_on, q_tg = agent.q_net(o, p)[0], agent.target_net(o, p)[0]
+        best = int((q_on @ p[0]).argmax())
+        return q_tg[best].numpy(), best
+
+    followed = cut = 0
+    for b, slot in enumerate(batch.indices):
+        nxt = (slot + 1) % buf.capacity
+        for i in range(w.shape[1]):
+            pref = w[b, i].numpy()
+            v0, best = value(buf.next_obs[slot], pref)
+            expect = buf.rewards[slot] + g * (1 - buf.terminated[slot]) * v0
+            if not buf.dones[slot] and nxt != buf.pos and buf.actions[nxt] == best:
+                v1, _ = value(buf.next_obs[nxt], pref)
+                expect = buf.rewards[slot] + g * (buf.rewards[nxt] + g * (1 - buf.terminated[nxt]) * v1)
+                followed += 1
+            else:
+                cut += 1
+            np.testing.assert_allclose(y[b, i], expect, rtol=1e-4, atol=1e-4)
+    assert followed > 20 and cut > 20  # both branches were checked
+
+
+def test_n_step_must_be_positive():
+    with pytest.raises(mope.ConfigError, match="n_step=0"):
+        MoPE("deep-sea-treasure-v0", n_step=0)

@@ -20,6 +20,7 @@ from mope.losses import (
     preference_interval_td,
     priority,
     taken_action_q,
+    watkins_n_step_targets,
 )
 
 # Envelope preferences (K = 2) and the designed Q_target(s'_b, a, w') for A = 3 actions, m = 2 objectives.
@@ -293,3 +294,22 @@ def test_mix_behaviour_returns_blends_only_the_own_row_of_fresh_transitions() ->
     torch.testing.assert_close(out[0, 0], 0.75 * y[0, 0] + 25.0)
     torch.testing.assert_close(out[0, 1:], y[0, 1:])
     torch.testing.assert_close(out[1], y[1])
+
+
+def test_watkins_n_step_targets_hand_values() -> None:
+    """Three steps of rewards 1, 2, 3 (one objective), values after each step 10, 20, 30, gamma 0.5. Row 0 follows
+    every step; row 1 is cut before step 1 (its greedy action differs from the stored one); row 2 before step 2."""
+    rewards = torch.tensor([[[1.0], [2.0], [3.0]]])
+    values = torch.tensor([10.0, 20.0, 30.0]).view(1, 3, 1, 1).expand(1, 3, 3, 1)
+    cont = torch.tensor([[[True, True, True], [True, False, True], [True, True, False]]])
+    y = watkins_n_step_targets(rewards, values, cont, 0.5)
+    assert y.shape == (1, 3, 1)
+    full = 1 + 0.5 * (2 + 0.5 * (3 + 0.5 * 30))
+    torch.testing.assert_close(y[0, :, 0], torch.tensor([full, 1 + 0.5 * 10, 1 + 0.5 * (2 + 0.5 * 20)]))
+    # one step, or nothing continued: the one-step target r + gamma V of eq. 4
+    torch.testing.assert_close(watkins_n_step_targets(rewards[:, :1], values[:, :1], cont[:, :1], 0.5),
+                               torch.full((1, 3, 1), 1 + 0.5 * 10))
+    # a row cut at step 1 ignores a "continue" flag at step 2 (its later steps are not read)
+    cut_then_on = torch.tensor([[[True] * 3, [False] * 3, [True] * 3]])
+    torch.testing.assert_close(watkins_n_step_targets(rewards, values, cut_then_on, 0.5),
+                               torch.full((1, 3, 1), 1 + 0.5 * 10))

@@ -261,3 +261,21 @@ def test_encoder_state_holds_only_what_earlier_checkpoints_hold() -> None:
     earlier checkpoint fail to load (``strides`` is derived from the space and not saved)."""
     for encoding in ("onehot", "joint", "scale"):
         assert set(ObsEncoder(DST_SPACE, encoding).state_dict()) == {"low", "scale"}
+
+
+def test_convex_double_q_values_equal_the_general_path():
+    """The fused n-step path (online picks the action, target reads its own preferred component) gives the same
+    values and greedy actions as both networks' forward_prefs followed by eq. 4's target without an envelope."""
+    from mope.losses import envelope_target
+
+    gen = torch.Generator().manual_seed(0)
+    x, a, c, m, n = 7, 4, 5, 3, 6
+    v_on, v_tg = torch.randn(x, 1, a, c, m, generator=gen), torch.randn(x, 1, a, c, m, generator=gen)
+    prefs = torch.rand(x, n, m, generator=gen)
+    prefs = prefs / prefs.sum(-1, keepdim=True)
+    values, greedy = ConvexQNetwork.double_q_values(v_on[:, 0], v_tg[:, 0], prefs)
+    q_on, q_tg = (ConvexQNetwork.select(v, prefs)[:, 0] for v in (v_on, v_tg))
+    expect = envelope_target(q_tg, torch.zeros(x, m), torch.zeros(x), prefs, 1.0, q_select=q_on, envelope=False)
+    torch.testing.assert_close(values, expect)
+    torch.testing.assert_close(greedy, torch.einsum("xim,xiam->xia", prefs, q_on).argmax(dim=2))
+    assert len(set(greedy.flatten().tolist())) > 1

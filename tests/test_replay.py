@@ -256,3 +256,49 @@ def test_buffer_state_dict_round_trip(prioritized: bool, n_added: int) -> None:
     fill(buf, 1, start=100)
     fill(other, 1, start=100)
     np.testing.assert_array_equal(other.obs, buf.obs)
+
+
+# ------------------------------------------------------------------------------------------- n-step sequences
+def chain(buf: ReplayBuffer, cells: list[int], done_at: set[int] = frozenset(), terminal_at: set[int] = frozenset()
+          ) -> None:
+    """Transitions cell c -> c + 1 (observation (c, 0)); ``done_at`` ends an episode there (the time limit), and
+    ``terminal_at`` by termination."""
+    for c in cells:
+        buf.add(np.array([c, 0]), np.array([0.5, 0.5]), c % 4, np.array([float(c), -1.0]), np.array([c + 1, 0]),
+                c in terminal_at, done=c in done_at or c in terminal_at)
+
+
+def test_sequences_follow_an_episode_and_stop_at_its_end() -> None:
+    buf = ReplayBuffer(10, (2,), 2, prioritized=False)
+    chain(buf, [0, 1, 2, 3, 4, 5], done_at={2}, terminal_at={4})
+    slots, valid = buf.sequences(np.array([0, 1, 2, 3, 4, 5]), 3)
+    np.testing.assert_array_equal(slots[:, 0], [0, 1, 2, 3, 4, 5])
+    np.testing.assert_array_equal(slots[1], [1, 2, 3])
+    assert valid.tolist() == [
+        [True, True, True],     # 0, 1, 2: 2 ends the episode after its own step
+        [True, True, False],    # 1, 2 | 3 belongs to the next episode
+        [True, False, False],   # 2 is the last step of its episode
+        [True, True, False],    # 3, 4 | 4 terminated
+        [True, False, False],
+        [True, False, False],   # 5 is the newest transition: slot 6 is not written yet
+    ]
+
+
+def test_sequences_stop_at_the_write_position_of_a_full_buffer() -> None:
+    buf = ReplayBuffer(4, (2,), 2, prioritized=False)
+    chain(buf, [0, 1, 2, 3, 4, 5])  # slots hold cells 4, 5, 2, 3; the next write goes to slot 2
+    slots, valid = buf.sequences(np.array([2, 3, 0, 1]), 3)
+    np.testing.assert_array_equal(slots, [[2, 3, 0], [3, 0, 1], [0, 1, 2], [1, 2, 3]])
+    assert valid.tolist() == [[True, True, True], [True, True, True], [True, True, False], [True, False, False]]
+    np.testing.assert_array_equal(buf.obs[slots[0], 0], [2, 3, 4])  # consecutive cells across the wrap
+
+
+def test_dones_of_checkpoints_without_them_are_inferred() -> None:
+    buf = ReplayBuffer(10, (2,), 2, prioritized=False)
+    chain(buf, [0, 1, 2, 7, 8], done_at={2})
+    state = buf.state_dict()
+    del state["dones"]  # a checkpoint saved before n_step
+    other = ReplayBuffer(10, (2,), 2, prioritized=False)
+    other.load_state_dict(state)
+    assert other.dones[:5].tolist() == [False, False, True, False, True]  # the newest one: no successor yet
+    np.testing.assert_array_equal(other.sequences(np.array([0, 3]), 3)[1], buf.sequences(np.array([0, 3]), 3)[1])

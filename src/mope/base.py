@@ -110,7 +110,8 @@ class BaseAgent(AgentState):
         action = self.act(obs, pref, greedy=False)
         next_obs, reward, terminated, truncated, _ = self.env.step(action)
         slot = self.buffer.pos
-        self.buffer.add(obs, pref, action, np.asarray(reward, dtype=np.float32), next_obs, terminated)
+        self.buffer.add(obs, pref, action, np.asarray(reward, dtype=np.float32), next_obs, terminated,
+                        done=terminated or truncated)
         self._obs = next_obs
         self._episode_actions.append(action)
         if self.config.return_mix:  # the trace of the episode's greedy tail (mope.losses.greedy_tail_returns)

@@ -59,7 +59,7 @@ PRESETS: dict[str, dict[str, Any]] = {
 #: Fields added after mope 0.2.0, with the values that reproduce the runs saved before them: a saved config (it has
 #: every other field) that lacks them is read with these values, not with today's defaults.
 LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0, "reward_scale": 1.0,
-                                "return_mix": 0.0, "return_window": 2_000}
+                                "return_mix": 0.0, "return_window": 2_000, "n_step": 1}
 
 
 def check_preset(name: str) -> str:
@@ -208,6 +208,10 @@ class Config:
     #: the mirrored map from diverging and raises DST's optimal share (docs/results/return-mix).
     return_mix: float = 0.5
     return_window: int = 2_000
+    #: Steps of reward in every target row (Watkins' Q(lambda) cut: a row's sequence stops at the first action
+    #: that is not greedy for that row's preference; mope.losses.watkins_n_step_targets). 1: the one-step target
+    #: of eq. 4.
+    n_step: int = 1
     #: Weight of the auxiliary loss: L = L^A + lb_weight * L^B. The paper uses 1.
     lb_weight: float = 1.0
     #: Homotopy of Yang et al.: the weight of L^B rises linearly from 0 to lb_weight over this many steps (0: off).
@@ -318,7 +322,7 @@ class Config:
                      "reward_scale"):
             need(_finite(getattr(self, name)) and getattr(self, name) > 0, name, "must be > 0")
         for name in ("batch_size", "gradient_steps", "target_update_freq", "epsilon_decay_steps", "n_omega",
-                     "n_intervals", "n_components", "n_critics", "return_window"):
+                     "n_intervals", "n_components", "n_critics", "return_window", "n_step"):
             need(getattr(self, name) >= 1, name, "must be >= 1")
         need(self.buffer_size >= self.batch_size, "buffer_size", f"must be >= batch_size ({self.batch_size})")
         for name in ("learning_starts", "lb_homotopy_steps"):

@@ -71,6 +71,37 @@ def envelope_target(q_next: torch.Tensor, rewards: torch.Tensor, terminated: tor
     return rewards.unsqueeze(1) + gamma * (1.0 - terminated).view(b, 1, 1) * q_star
 
 
+def watkins_n_step_targets(rewards: torch.Tensor, values: torch.Tensor, cont: torch.Tensor, gamma: float
+                           ) -> torch.Tensor:
+    """n-step targets of eq. 4 for every row preference, each cut where its own greedy policy leaves the data.
+
+    Row ``(b, i)`` follows the stored sequence ``t, t+1, ..., t+n-1`` of transition ``b`` while each next action
+    is the greedy one of *its* preference ``w_i`` (Watkins' Q(lambda) cut, lambda = 1 up to ``n`` steps), so the
+    target is that of the greedy policy of ``w_i`` and carries no off-policy bias::
+
+        G_k = r_k + gamma * (G_{k+1} if cont[k+1] else V_k),      G_{n-1} = r_{n-1} + gamma * V_{n-1}
+
+    where ``V_k`` is the envelope value of eq. 4 after step ``k`` (0 past a terminal step). With ``n = 1`` or no
+    step continued it is the one-step target of eq. 4. A reward then reaches ``n`` states back in one update
+    instead of one.
+
+    Args:
+        rewards: ``(B, n, m)`` rewards of the sequence's steps.
+        values: ``(B, n, N, m)`` ``V(s_{t+k+1}, w_i)``, already zero after a terminal step.
+        cont: ``(B, n, N)`` bool, whether step ``k`` continues row ``i``'s trace (``cont[:, 0]`` is not read).
+        gamma: Discount factor.
+
+    Returns:
+        ``(B, N, m)`` targets.
+    """
+    n = rewards.shape[1]
+    g = rewards[:, n - 1].unsqueeze(1) + gamma * values[:, n - 1]
+    for k in range(n - 2, -1, -1):  # n is a handful of steps: the loop runs over time, never over samples
+        after = torch.where(cont[:, k + 1].unsqueeze(-1), g, values[:, k])
+        g = rewards[:, k].unsqueeze(1) + gamma * after
+    return g
+
+
 def greedy_tail_returns(rewards: np.ndarray, next_values: np.ndarray, greedy: np.ndarray, terminated: bool,
                         gamma: float) -> np.ndarray:
     """Return of one finished episode from each step, along its greedy actions (Watkins' trace cut).

@@ -242,6 +242,27 @@ class ConvexQNetwork(nn.Module):
         worst = torch.einsum("bkm,bhkam->bhka", prefs, q).argmin(dim=1, keepdim=True)  # (B, 1, K, A)
         return q.gather(1, worst[..., None].expand(b, 1, k, a, m)).squeeze(1)
 
+    @staticmethod
+    def double_q_values(v_online: torch.Tensor, v_target: torch.Tensor, prefs: torch.Tensor
+                        ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Greedy actions and double-Q values at each row's own preference, from one head's components.
+
+        ``v_online``, ``v_target`` ``(X, A, C, m)``, ``prefs`` ``(X, N, m)``. The online network picks the action
+        (its best component over all actions, ``argmax_{a, c} w^T v_online``); the target network's value of that
+        action is its own component that ``w`` prefers. The same numbers as :meth:`forward_prefs` of both
+        networks followed by :func:`mope.losses.envelope_target` with ``envelope=False``, at a fraction of the
+        cost: the target's components are scored for the chosen action only.
+
+        Returns:
+            ``(values (X, N, m), greedy (X, N))``.
+        """
+        x, a, c, m = v_online.shape
+        n = prefs.shape[1]
+        greedy = torch.einsum("xim,xacm->xiac", prefs, v_online).reshape(x, n, a * c).argmax(dim=2) // c
+        v_act = v_target[torch.arange(x, device=prefs.device).unsqueeze(1), greedy]  # (X, N, C, m)
+        best = torch.einsum("xim,xicm->xic", prefs, v_act).argmax(dim=2)
+        return v_act.gather(2, best[..., None, None].expand(x, n, 1, m)).squeeze(2), greedy
+
     def forward(self, obs: torch.Tensor, pref: torch.Tensor) -> torch.Tensor:
         """``(R, |A|, m)`` Q-vectors of ``R`` observations, each under its own preference ``(R, m)``."""
         return self.forward_prefs(obs, pref.unsqueeze(1)).squeeze(1)

@@ -106,6 +106,8 @@ class ReplayBuffer:
         self.actions = np.zeros(capacity, dtype=np.int64)
         self.rewards = np.zeros((capacity, n_objectives), dtype=np.float32)
         self.terminated = np.zeros(capacity, dtype=np.float32)
+        #: Whether each transition ended its episode (terminated or truncated): n-step sequences stop there.
+        self.dones = np.zeros(capacity, dtype=bool)
         #: Greedy-tail return of each transition under its own preference, and the step it was computed at
         #: (``NO_RETURN``: none); written by :meth:`set_returns` when an episode ends.
         self.returns = np.zeros((capacity, n_objectives), dtype=np.float32)
@@ -119,8 +121,11 @@ class ReplayBuffer:
         return self.capacity if self.full else self.pos
 
     def add(self, obs: np.ndarray, pref: np.ndarray, action: int, reward: np.ndarray, next_obs: np.ndarray,
-            terminated: bool) -> None:
-        """Store one transition; a new transition gets the largest priority seen so far."""
+            terminated: bool, done: bool | None = None) -> None:
+        """Store one transition; a new transition gets the largest priority seen so far.
+
+        ``done`` (default: ``terminated``) says the episode ended here, by termination or the time limit.
+        """
         i = self.pos
         self.obs[i] = obs
         self.prefs[i] = pref
@@ -128,6 +133,7 @@ class ReplayBuffer:
         self.rewards[i] = reward
         self.next_obs[i] = next_obs
         self.terminated[i] = float(terminated)
+        self.dones[i] = terminated if done is None else done
         self.return_steps[i] = NO_RETURN
         if self.tree is not None:
             self.tree.update(np.array([i]), np.array([self.max_priority]))
@@ -154,6 +160,25 @@ class ReplayBuffer:
         return Batch(idx, self.obs[idx], self.prefs[idx], self.actions[idx], self.rewards[idx],
                      self.next_obs[idx], self.terminated[idx], weights)
 
+    def sequences(self, idx: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """The slots of the ``n`` transitions that start at each index in ``idx`` and whether each is there.
+
+        Transitions of one episode sit in consecutive slots (one environment writes them in order), so the
+        sequence from slot ``i`` is ``i, i+1, ...`` (mod capacity). Step ``k`` is valid while no earlier step
+        ended the episode and the sequence has not reached the write position (the next slot to be written is
+        not a successor of the newest one).
+
+        Returns:
+            ``(slots, valid)``, both ``(len(idx), n)``; ``valid[:, 0]`` is all True.
+        """
+        idx = np.asarray(idx, dtype=np.int64)
+        slots = (idx[:, None] + np.arange(n)) % self.capacity
+        valid = np.ones(slots.shape, dtype=bool)
+        if n > 1:
+            cont = ~self.dones[slots[:, :-1]] & (slots[:, 1:] != self.pos)
+            valid[:, 1:] = np.logical_and.accumulate(cont, axis=1)
+        return slots, valid
+
     def set_returns(self, idx: np.ndarray, returns: np.ndarray, step: int) -> None:
         """Store the returns of a finished episode's transitions (slots ``idx``), computed at ``step``."""
         self.returns[idx] = returns
@@ -172,7 +197,8 @@ class ReplayBuffer:
         state = {
             "obs": self.obs[:n].copy(), "next_obs": self.next_obs[:n].copy(), "prefs": self.prefs[:n].copy(),
             "actions": self.actions[:n].copy(), "rewards": self.rewards[:n].copy(),
-            "terminated": self.terminated[:n].copy(), "returns": self.returns[:n].copy(),
+            "terminated": self.terminated[:n].copy(), "dones": self.dones[:n].copy(),
+            "returns": self.returns[:n].copy(),
             "return_steps": self.return_steps[:n].copy(), "pos": self.pos, "full": self.full,
             "max_priority": self.max_priority,
         }
@@ -188,6 +214,12 @@ class ReplayBuffer:
         for key in ("returns", "return_steps"):  # absent from checkpoints before return_mix
             if key in state:
                 getattr(self, key)[:n] = np.asarray(state[key])
+        if "dones" in state:
+            self.dones[:n] = np.asarray(state["dones"])
+        else:  # checkpoints before n_step: an episode ended where the next slot does not start at this next_obs
+            succ = np.roll(np.arange(n), -1)
+            self.dones[:n] = (self.terminated[:n] > 0) | np.any(
+                (self.next_obs[:n] != self.obs[succ]).reshape(n, -1), axis=1)
         self.pos, self.full, self.max_priority = int(state["pos"]), bool(state["full"]), float(state["max_priority"])
         if self.tree is not None and "priorities" in state:
             self.tree.update(np.arange(n), np.asarray(state["priorities"]))

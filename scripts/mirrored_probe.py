@@ -155,9 +155,10 @@ variants = {"--lam": GreedyReturns, "--beta": CountPessimism, "double-components
 cls = next((v for flag, v in variants.items() if flag in sys.argv[3:]), MoPE)
 env_id, seed, steps = option("--env", "deep-sea-treasure-mirrored-v0"), int(option("--seed", "2")), \
     int(option("--steps", "9000"))
-# return_mix 0: the probes ran on the defaults before it became one (the greedyret probes mix in their own way)
+# return_mix 0, n_step 1, epsilon over 10k: the probes ran on the defaults before these became defaults (the
+# greedyret probes mix in their own way)
 cfg = Config.from_dict({"env_id": env_id, "algo": "mope", "seed": seed, "total_steps": 20000, "return_mix": 0.0,
-                        **overrides})
+                        "n_step": 1, "epsilon_decay_steps": 10_000, **overrides})
 agent = cls(env_id, cfg)
 t = time.time()
 recs = agent.train(steps, eval_env=make_env(env_id), eval_every=3000 if steps < 20000 else 5000)

@@ -263,7 +263,7 @@ OLD_DEFAULTS = {"q_head": "conditioned", "obs_encoding": "scale", "hidden_sizes"
                 "envelope_prefs": "relabel", "lb_homotopy_steps": 0, "learning_starts": 200, "gamma": 0.99,
                 "double_q": True, "clip_targets": True, "epsilon_decay_steps": 10_000, "epsilon_end": 0.05,
                 "per_alpha": 0.6, "sigma_omega": 0.04, "mi_alpha": 0.1, "n_intervals": 10, "buffer_size": 20_000,
-                "lb_weight": 1.0, "return_mix": 0.0}
+                "lb_weight": 1.0, "return_mix": 0.0, "n_step": 1}
 
 
 def test_presets() -> None:
@@ -273,6 +273,8 @@ def test_presets() -> None:
     assert env.hidden_sizes == (256,) * 4 and env.n_omega == 4 and env.max_grad_norm == 0.1
     assert env.lb_homotopy_steps == 10_000 and env.target_update_freq == 1000 and env.seed == 3
     assert env.return_mix == 0.0 and Config().return_mix == 0.5  # the peer has no behaviour returns; mope has
+    assert (env.n_step, env.epsilon_decay_steps) == (1, 10_000) and (Config().n_step, Config().epsilon_decay_steps) \
+        == (5, 5_000)
     assert Config.from_dict({"preset": "paper", "batch_size": 8}).batch_size == 8  # keys override the preset
     assert Config.from_dict({"preset": "mope"}) == Config()
     with pytest.raises(ConfigError, match="unknown preset 'papr' \\(did you mean 'paper'\\?\\)"):
@@ -285,7 +287,7 @@ def test_a_config_saved_by_mope_0_1_reads_with_the_defaults_it_was_trained_with(
              "extra": {}, "algo": "mope", "seed": 1}
     c = Config.from_dict(saved)
     assert c.q_head == "conditioned" and c.target_tau is None and c.relabel_broad == 0.0 and c.seed == 1
-    assert c.learning_rate_end is None and c.return_mix == 0.0
+    assert c.learning_rate_end is None and c.return_mix == 0.0 and c.n_step == 1 and c.epsilon_decay_steps == 10_000
 
 
 def test_a_config_saved_before_the_later_fields_keeps_the_values_it_ran_with() -> None:

@@ -34,7 +34,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from mope import losses
+from mope import losses, targets
 from mope.agent_state import resolve_device
 from mope.base import BaseAgent, linear_schedule
 from mope.config import Config, check_algo
@@ -305,66 +305,19 @@ class MoPE(BaseAgent):
 
     @torch.no_grad()
     def _envelope_target(self, batch: Batch, w: torch.Tensor, acting: torch.Tensor) -> torch.Tensor:
-        """Target y of eq. 4: one target-network pass over the B x K envelope rows (plus one online for double Q)."""
+        """Target y of eq. 4 (:mod:`mope.targets`: one step, or ``n_step`` with each row's Watkins cut), clamped
+        to the return bounds and, with ``return_mix``, blended with the behaviour's greedy-tail returns."""
         c = self.config
         if c.n_step > 1:
-            y = self._n_step_target(batch, w, acting, c.n_step)
+            y = targets.n_step_target(self.q_net, self.target_net, self.buffer, batch.indices, w, acting, c, c.n_step)
         else:
-            next_obs = self._tensor(batch.next_obs)
-            env_prefs, envelope = losses.envelope_set(c.envelope_prefs, w, acting)
-            q_next = self.target_net.forward_prefs(next_obs, env_prefs)
-            q_select = self.q_net.forward_prefs(next_obs, env_prefs) if c.double_q else None
-            rewards = self._tensor(batch.rewards)
-            if c.reward_scale != 1.0:
-                rewards = rewards * c.reward_scale
-            y = losses.envelope_target(q_next, rewards, self._tensor(batch.terminated), w, c.gamma,
-                                       q_select=q_select, envelope=envelope)
+            y = targets.one_step_target(self.q_net, self.target_net, self.buffer, batch.indices, w, acting, c)
         y = losses.clip_targets(y, self._q_low_t, self._q_high_t) if c.clip_targets else y
         if c.return_mix:
             fresh = self.global_step - self.buffer.return_steps[batch.indices] < c.return_window
             y = losses.mix_behaviour_returns(y, self._tensor(self.buffer.returns[batch.indices]),
                                              self._tensor(fresh, torch.bool), c.return_mix)
         return y
-
-    @torch.no_grad()
-    def _n_step_target(self, batch: Batch, w: torch.Tensor, acting: torch.Tensor, n: int) -> torch.Tensor:
-        """Eq. 4's target over ``n`` stored steps (``n_step``), each row cut where its preference's greedy action
-        differs from the stored one (:func:`mope.losses.watkins_n_step_targets`). One pass of each network over the
-        ``B x n`` next states gives the envelope value after every step and the rows' greedy actions."""
-        c = self.config
-        b, rows, m = w.shape
-        slots, valid = self.buffer.sequences(batch.indices, n)
-        next_obs = self._tensor(self.buffer.next_obs[slots.reshape(-1)])
-        not_end = 1.0 - self._tensor(self.buffer.terminated[slots.reshape(-1)]).unsqueeze(-1).unsqueeze(-1)
-        values, greedy = self._values_after(next_obs, w, acting, n)
-        values, greedy = values * not_end, greedy.view(b, n, rows)
-        taken = self._tensor(self.buffer.actions[slots], torch.int64)  # (B, n)
-        cont = torch.zeros(b, n, rows, dtype=torch.bool, device=self.device)
-        cont[:, 1:] = self._tensor(valid[:, 1:], torch.bool).unsqueeze(-1) & (greedy[:, :-1] == taken[:, 1:, None])
-        rewards = self._tensor(self.buffer.rewards[slots]) * c.reward_scale
-        return losses.watkins_n_step_targets(rewards, values.view(b, n, rows, m), cont, c.gamma)
-
-    def _values_after(self, next_obs: torch.Tensor, w: torch.Tensor, acting: torch.Tensor, n: int
-                      ) -> tuple[torch.Tensor, torch.Tensor]:
-        """For the ``B x n`` states after each stored step (rows of one transition consecutive): eq. 4's value
-        ``(B*n, N, m)`` (no termination mask) and the rows' greedy actions ``(B*n, N)`` under the online net."""
-        c = self.config
-        w_rep = w.repeat_interleave(n, dim=0)
-        convex = isinstance(self.q_net, ConvexQNetwork) and self.q_net.n_critics == 1
-        if convex and c.double_q and c.envelope_prefs == "own":  # the default: one pass of each net, no select
-            states, inverse = torch.unique(next_obs, dim=0, return_inverse=True)  # consecutive steps share states
-            return ConvexQNetwork.double_q_values(self.q_net.components(states)[inverse, 0],
-                                                  self.target_net.components(states)[inverse, 0], w_rep)
-        env_prefs, envelope = losses.envelope_set(c.envelope_prefs, w, acting)
-        env_prefs = env_prefs.repeat_interleave(n, dim=0)
-        q_next = self.target_net.forward_prefs(next_obs, env_prefs)
-        q_online = self.q_net.forward_prefs(next_obs, env_prefs)
-        values = losses.envelope_target(q_next, torch.zeros(len(next_obs), w.shape[2], device=self.device),
-                                        torch.zeros(len(next_obs), device=self.device), w_rep, 1.0,
-                                        q_select=q_online if c.double_q else None, envelope=envelope)
-        if c.envelope_prefs not in ("relabel", "own"):  # the envelope set is not the rows': Q at the rows' own
-            q_online = self.q_net.forward_prefs(next_obs, w_rep)
-        return values, torch.einsum("xim,xiam->xia", w_rep, q_online).argmax(dim=2)
 
     def _gradient_step(self, loss: torch.Tensor) -> None:
         self.optimizer.zero_grad(set_to_none=True)

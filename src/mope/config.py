@@ -48,12 +48,12 @@ PRESETS: dict[str, dict[str, Any]] = {
     "paper": {"q_head": "conditioned", "obs_encoding": "scale", "hidden_sizes": [64, 128, 128, 64],
               "learning_rate": 1e-3, "learning_rate_end": None, "batch_size": 32, "target_tau": None,
               "target_update_freq": 100, "max_grad_norm": 10.0, "n_omega": 64, "relabel_broad": 0.0,
-              "envelope_prefs": "relabel", "return_mix": 0.0},
+              "envelope_prefs": "relabel", "return_mix": 0.0, "n_step": 1, "epsilon_decay_steps": 10_000},
     "envelope": {"q_head": "conditioned", "obs_encoding": "scale", "hidden_sizes": [256, 256, 256, 256],
                  "learning_rate": 3e-4, "learning_rate_end": None, "batch_size": 64, "n_omega": 4,
                  "target_tau": None, "target_update_freq": 1000, "max_grad_norm": 0.1, "lb_homotopy_steps": 10_000,
                  "relabel_broad": 0.0, "envelope_prefs": "relabel", "clip_targets": False, "learning_starts": 100,
-                 "per_alpha": 0.6, "return_mix": 0.0},
+                 "per_alpha": 0.6, "return_mix": 0.0, "n_step": 1, "epsilon_decay_steps": 10_000},
 }
 
 #: Fields added after mope 0.2.0, with the values that reproduce the runs saved before them: a saved config (it has
@@ -167,10 +167,9 @@ class Config:
     #: Episode time limit; ``None`` uses the limit the environment registers (100 on Deep-Sea-Treasure).
     max_episode_steps: int | None = None
 
-    #: How observations enter the networks: "scale" (a bounded Box to [0, 1]: the paper's (x, y) input),
-    #: "onehot" (each coordinate of an integer Box one-hot encoded), "joint" (the whole cell of a small integer Box
-    #: one-hot encoded: no features shared between states), or "auto" (onehot for a small integer Box,
-    #: else scale).
+    #: How observations enter the networks: "scale" (a bounded Box to [0, 1]: the paper's (x, y) input), "onehot"
+    #: (each coordinate of an integer Box one-hot), "joint" (the whole cell of a small integer Box one-hot: no
+    #: features shared between states), or "auto" (onehot for a small integer Box, else scale).
     obs_encoding: str = "auto"
 
     # --- EQL core (paper eq. 4; Yang et al. 2019) ------------------------------------------------------------
@@ -187,8 +186,7 @@ class Config:
     n_critics: int = 1
     #: Weight of the convex head's component loss (each target also trains its nearest component).
     component_loss_weight: float = 1.0
-    #: Within the convex head's component loss, weight of the pull of every component toward its nearest target
-    #: (0: off).
+    #: Within the component loss, weight of the pull of every component toward its nearest target (0: off).
     component_anchor_weight: float = 0.0
     hidden_sizes: tuple[int, ...] = (256, 256, 256)
     learning_rate: float = 3e-4
@@ -203,15 +201,13 @@ class Config:
     target_update_freq: int = 100
     #: Polyak averaging of the target network at every step with this weight; None: the hard copy above.
     target_tau: float | None = 0.005
-    #: Weight of the episode's greedy-tail return in the target row of its own preference (0: off; see
-    #: mope.losses.greedy_tail_returns); returns older than return_window steps are not used. Default 0.5: it keeps
-    #: the mirrored map from diverging and raises DST's optimal share (docs/results/return-mix).
+    #: Weight of the episode's greedy-tail return in the target row of its own preference (0: off;
+    #: mope.losses.greedy_tail_returns; docs/results/return-mix); returns older than return_window are not used.
     return_mix: float = 0.5
     return_window: int = 2_000
-    #: Steps of reward in every target row (Watkins' Q(lambda) cut: a row's sequence stops at the first action
-    #: that is not greedy for that row's preference; mope.losses.watkins_n_step_targets). 1: the one-step target
-    #: of eq. 4.
-    n_step: int = 1
+    #: Stored steps of reward in every target row, each row cut at its own first non-greedy action
+    #: (mope.losses.watkins_n_step_targets; docs/results/n-step). 1: the one-step target of eq. 4.
+    n_step: int = 5
     #: Weight of the auxiliary loss: L = L^A + lb_weight * L^B. The paper uses 1.
     lb_weight: float = 1.0
     #: Homotopy of Yang et al.: the weight of L^B rises linearly from 0 to lb_weight over this many steps (0: off).
@@ -220,12 +216,12 @@ class Config:
     #: Pick (a*, w'*) of the envelope target with the online network, read the value from the target network
     #: (double Q-learning). Not in the paper; see docs/design.md for why it is on by default.
     double_q: bool = True
-    #: Clamp the targets y to the range of returns the reward bounds allow (reward_space low/high and gamma).
-    #: Not in the paper; see docs/design.md.
+    #: Clamp the targets y to the returns the reward bounds allow (not in the paper; see docs/design.md).
     clip_targets: bool = True
     epsilon_start: float = 1.0
     epsilon_end: float = 0.05
-    epsilon_decay_steps: int = 10_000
+    #: Linear decay of epsilon over this many steps (the paper and envelope presets: 10,000).
+    epsilon_decay_steps: int = 5_000
     #: Preferences per sampled transition (N_omega). EQL draws them uniformly from the simplex, shared by
     #: the batch (Yang et al.'s ``weight_num``); EE draws them within ``sigma_omega`` of the transition's own.
     n_omega: int = 32

@@ -1,0 +1,80 @@
+"""The target y of eq. 4 for a sampled batch: one step, or n stored steps with each row's own Watkins cut.
+
+The agent calls :func:`one_step_target` or :func:`n_step_target` (``Config.n_step``); both run the networks
+once over the states they need and leave the arithmetic to :mod:`mope.losses`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+from mope import losses
+from mope.config import Config
+from mope.networks import ConvexQNetwork
+from mope.replay import ReplayBuffer
+
+
+def _t(x: np.ndarray, device: torch.device, dtype: torch.dtype = torch.float32) -> torch.Tensor:
+    return torch.as_tensor(np.asarray(x), dtype=dtype, device=device)
+
+
+@torch.no_grad()
+def one_step_target(q_net: nn.Module, target_net: nn.Module, buffer: ReplayBuffer, idx: np.ndarray,
+                    w: torch.Tensor, acting: torch.Tensor, cfg: Config) -> torch.Tensor:
+    """Eq. 4 for transitions ``idx``: one target-network pass over the B x K envelope rows (plus one online pass
+    for double Q). ``(B, N, m)``, in the learner's units (rewards times ``reward_scale``)."""
+    dev = w.device
+    next_obs = _t(buffer.next_obs[idx], dev)
+    env_prefs, envelope = losses.envelope_set(cfg.envelope_prefs, w, acting)
+    q_next = target_net.forward_prefs(next_obs, env_prefs)
+    q_select = q_net.forward_prefs(next_obs, env_prefs) if cfg.double_q else None
+    rewards = _t(buffer.rewards[idx], dev)
+    if cfg.reward_scale != 1.0:
+        rewards = rewards * cfg.reward_scale
+    return losses.envelope_target(q_next, rewards, _t(buffer.terminated[idx], dev), w, cfg.gamma,
+                                  q_select=q_select, envelope=envelope)
+
+
+@torch.no_grad()
+def n_step_target(q_net: nn.Module, target_net: nn.Module, buffer: ReplayBuffer, idx: np.ndarray,
+                  w: torch.Tensor, acting: torch.Tensor, cfg: Config, n: int) -> torch.Tensor:
+    """Eq. 4's target over ``n`` stored steps, each row cut where its preference's greedy action differs from the
+    stored one (:func:`mope.losses.watkins_n_step_targets`). One pass of each network over the ``B x n`` next
+    states gives the envelope value after every step and the rows' greedy actions. ``n = 1`` is
+    :func:`one_step_target`."""
+    dev = w.device
+    b, rows, m = w.shape
+    slots, valid = buffer.sequences(idx, n)
+    next_obs = _t(buffer.next_obs[slots.reshape(-1)], dev)
+    not_end = 1.0 - _t(buffer.terminated[slots.reshape(-1)], dev)[:, None, None]
+    values, greedy = values_after(q_net, target_net, next_obs, w, acting, cfg, n)
+    values, greedy = values * not_end, greedy.view(b, n, rows)
+    taken = _t(buffer.actions[slots], dev, torch.int64)  # (B, n)
+    cont = torch.zeros(b, n, rows, dtype=torch.bool, device=dev)
+    cont[:, 1:] = _t(valid[:, 1:], dev, torch.bool).unsqueeze(-1) & (greedy[:, :-1] == taken[:, 1:, None])
+    rewards = _t(buffer.rewards[slots], dev) * cfg.reward_scale
+    return losses.watkins_n_step_targets(rewards, values.view(b, n, rows, m), cont, cfg.gamma)
+
+
+def values_after(q_net: nn.Module, target_net: nn.Module, next_obs: torch.Tensor, w: torch.Tensor,
+                 acting: torch.Tensor, cfg: Config, n: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """For the ``B x n`` states after each stored step (rows of one transition consecutive): eq. 4's value
+    ``(B*n, N, m)`` (no termination mask) and the rows' greedy actions ``(B*n, N)`` under the online network."""
+    w_rep = w.repeat_interleave(n, dim=0)
+    convex = isinstance(q_net, ConvexQNetwork) and q_net.n_critics == 1
+    if convex and cfg.double_q and cfg.envelope_prefs == "own":  # the default: one pass of each net, no select
+        states, inverse = torch.unique(next_obs, dim=0, return_inverse=True)  # consecutive steps share states
+        return ConvexQNetwork.double_q_values(q_net.components(states)[inverse, 0],
+                                              target_net.components(states)[inverse, 0], w_rep)
+    env_prefs, envelope = losses.envelope_set(cfg.envelope_prefs, w, acting)
+    env_prefs = env_prefs.repeat_interleave(n, dim=0)
+    q_next = target_net.forward_prefs(next_obs, env_prefs)
+    q_online = q_net.forward_prefs(next_obs, env_prefs)
+    zeros = torch.zeros(len(next_obs), w.shape[2], device=w.device)
+    values = losses.envelope_target(q_next, zeros, zeros[:, 0], w_rep, 1.0,
+                                    q_select=q_online if cfg.double_q else None, envelope=envelope)
+    if cfg.envelope_prefs not in ("relabel", "own"):  # the envelope set is not the rows': Q at the rows' own
+        q_online = q_net.forward_prefs(next_obs, w_rep)
+    return values, torch.einsum("xim,xiam->xia", w_rep, q_online).argmax(dim=2)

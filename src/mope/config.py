@@ -207,7 +207,7 @@ class Config:
     return_window: int = 2_000
     #: Stored steps of reward in every target row, each row cut at its own first non-greedy action
     #: (mope.losses.watkins_n_step_targets; docs/results/n-step). 1: the one-step target of eq. 4.
-    n_step: int = 5
+    n_step: int = 1
     #: Weight of the auxiliary loss: L = L^A + lb_weight * L^B. The paper uses 1.
     lb_weight: float = 1.0
     #: Homotopy of Yang et al.: the weight of L^B rises linearly from 0 to lb_weight over this many steps (0: off).
@@ -220,8 +220,8 @@ class Config:
     clip_targets: bool = True
     epsilon_start: float = 1.0
     epsilon_end: float = 0.05
-    #: Linear decay of epsilon over this many steps (the paper and envelope presets: 10,000).
-    epsilon_decay_steps: int = 5_000
+    #: Linear decay of epsilon from epsilon_start to epsilon_end over this many steps.
+    epsilon_decay_steps: int = 10_000
     #: Preferences per sampled transition (N_omega). EQL draws them uniformly from the simplex, shared by
     #: the batch (Yang et al.'s ``weight_num``); EE draws them within ``sigma_omega`` of the transition's own.
     n_omega: int = 32

@@ -3,10 +3,13 @@
 Usage::
 
     .venv/bin/python benchmarks/bench_speed.py [--steps 1000] [--repeats 3] [--out benchmarks/results/speed.md]
+        [--variant n_step=5 ...]
 
 It warms each agent up past ``learning_starts`` (so every timed step includes a gradient update), then times
 ``--steps`` training steps, ``--repeats`` times, and reports the median. The evaluation is timed on the same
-agent with the paper's protocol (2,000 uniform preferences plus 100 equally spaced ones for EUM). The machine
+agent with the paper's protocol (2,000 uniform preferences plus 100 equally spaced ones for EUM). Each
+``--variant KEY=VALUE[,KEY=VALUE]`` times mope with those settings in the same run, reported as a ratio to the
+default mope. The machine
 (CPU model, cores, torch threads, versions) is printed with the table. Run it on an otherwise idle machine.
 """
 
@@ -23,6 +26,7 @@ import torch
 
 import mope
 from mope import Evaluator, MoPE, make_env
+from mope.cli import _parse_sets
 
 
 def cpu_model() -> str:
@@ -81,6 +85,8 @@ def main() -> None:
     parser.add_argument("--checkpoint", default=None,
                         help="also time the evaluation of this trained agent (loops closed and stepped)")
     parser.add_argument("--eval-only", action="store_true", help="skip the training timings")
+    parser.add_argument("--variant", action="append", default=[],
+                        help="KEY=VALUE[,KEY=VALUE]: also time mope with these settings (repeatable)")
     args = parser.parse_args()
 
     rows = []
@@ -88,9 +94,13 @@ def main() -> None:
     if not args.eval_only:
         for algo in ("eql", "mope"):
             s = time_training(algo, args.steps, args.repeats)
-            rows.append((f"`{algo}` training, paper settings (B=32, N_omega=64)", s * 1000 / args.steps,
-                         "s / 1k steps"))
+            rows.append((f"`{algo}` training, the defaults", s * 1000 / args.steps, "s / 1k steps"))
         ratio = rows[1][1] / rows[0][1]
+        for spec in args.variant:
+            overrides = _parse_sets(spec.split(","))
+            s = time_training("mope", args.steps, args.repeats, **overrides) * 1000 / args.steps
+            rows.append((f"`mope` training, {spec}", s, "s / 1k steps"))
+            rows.append((f"ratio `mope` {spec} / `mope` defaults per step", s / rows[1][1], ""))
     ev = time_evaluation(args.repeats)
     rows.append(("one evaluation, 2,000 uniform + 100 equally spaced preferences (agent after 500 steps)", ev, "s"))
     if args.checkpoint:

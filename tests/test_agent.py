@@ -311,10 +311,11 @@ def test_n_step_target_of_one_step_is_eq4():
     torch.testing.assert_close(targets.one_step_target(*args), agent._envelope_target(batch, w, acting))
 
 
-def test_two_step_target_follows_each_rows_own_greedy_action():
+@pytest.mark.parametrize("q_head", ["convex", "conditioned"])  # the fused convex path and the general one
+def test_two_step_target_follows_each_rows_own_greedy_action(q_head):
     """n_step = 2 against a per-row reference: a row takes the second stored reward only where the stored action
     there is the greedy one of its own preference (and the episode goes on); else it is eq. 4's one-step target."""
-    agent, batch, w, acting = _n_step_agent(n_step=2)
+    agent, batch, w, acting = _n_step_agent(n_step=2, q_head=q_head)
     y = agent._envelope_target(batch, w, acting).numpy()
     buf, g = agent.buffer, agent.config.gamma
 

@@ -346,3 +346,5 @@ def test_two_step_target_follows_each_rows_own_greedy_action(q_head):
 def test_n_step_must_be_positive():
     with pytest.raises(mope.ConfigError, match="n_step=0"):
         MoPE("deep-sea-treasure-v0", n_step=0)
+    with pytest.raises(mope.ConfigError, match="n_step=100000 is out of range"):
+        MoPE("deep-sea-treasure-v0", n_step=100_000)

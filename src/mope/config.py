@@ -220,7 +220,6 @@ class Config:
     clip_targets: bool = True
     epsilon_start: float = 1.0
     epsilon_end: float = 0.05
-    #: Linear decay of epsilon from epsilon_start to epsilon_end over this many steps.
     epsilon_decay_steps: int = 10_000
     #: Preferences per sampled transition (N_omega). EQL draws them uniformly from the simplex, shared by
     #: the batch (Yang et al.'s ``weight_num``); EE draws them within ``sigma_omega`` of the transition's own.
@@ -318,9 +317,10 @@ class Config:
                      "reward_scale"):
             need(_finite(getattr(self, name)) and getattr(self, name) > 0, name, "must be > 0")
         for name in ("batch_size", "gradient_steps", "target_update_freq", "epsilon_decay_steps", "n_omega",
-                     "n_intervals", "n_components", "n_critics", "return_window", "n_step"):
+                     "n_intervals", "n_components", "n_critics", "return_window"):
             need(getattr(self, name) >= 1, name, "must be >= 1")
         need(self.buffer_size >= self.batch_size, "buffer_size", f"must be >= batch_size ({self.batch_size})")
+        need(1 <= self.n_step <= 1000, "n_step", "must lie in [1, 1000] (an update runs batch_size x n_step states)")
         for name in ("learning_starts", "lb_homotopy_steps"):
             need(getattr(self, name) >= 0, name, "must be >= 0")
         for name in ("lb_weight", "per_alpha", "mi_alpha", "component_loss_weight", "component_anchor_weight"):

@@ -1,0 +1,112 @@
+"""Probes of the early time-outs on Deep-Sea-Treasure (treasure-heavy preferences loop at 2k-9k steps, see
+docs/results/early-loops). Each probe trains mope with the defaults plus JSON overrides and optional patches,
+evaluating every 1,000 steps, and prints one JSON line.
+
+    python scripts/coverage_probe.py NAME '{"config_key": value}' [tight-bounds] [double-components]
+        [--greedy-share P] [--ez MU] [--env ID] [--seed S] [--steps N]
+
+``tight-bounds`` (not in mope): clamps targets to the map's own return bounds (first objective within
+[min(0, seabed), largest treasure]) instead of the reward-space bounds (largest treasure / (1 - gamma)).
+``--greedy-share P`` (not in mope): each episode, with probability P, acts with epsilon_end (greedy episodes
+run the greedy policy's loops, so their real returns reach the targets).
+``--ez MU`` (not in mope): temporally extended epsilon-greedy (Dabney et al. 2021): an exploring step repeats
+one random action for n ~ Zeta(MU) steps.
+``double-components`` (not in mope): the online network picks the (action, component) pair and the target
+network's vector of that same pair is the value (double Q over the convex head's components too).
+"""
+import json
+import sys
+import time
+
+import numpy as np
+import torch
+
+from mope import targets
+from mope.agent import MoPE
+from mope.config import Config
+from mope.envs import make_env
+from mope.networks import ConvexQNetwork
+
+
+def double_components(v_online, v_target, prefs):
+    x, a, c, m = v_online.shape
+    n = prefs.shape[1]
+    flat = torch.einsum("xim,xacm->xiac", prefs, v_online).reshape(x, n, a * c).argmax(dim=2)
+    rows = torch.arange(x, device=prefs.device).unsqueeze(1)
+    return v_target[rows, flat // c, flat % c], flat // c
+
+
+class GreedyEpisodes(MoPE):
+    """A share of the episodes acts with epsilon_end instead of the scheduled epsilon (drawn per episode)."""
+
+    share = 0.0
+
+    def _start_episode(self):
+        super()._start_episode()
+        if not hasattr(self, "_ep_rng"):
+            self._ep_rng = np.random.default_rng(10_000 + self.config.seed)
+        self._greedy_episode = bool(self._ep_rng.random() < self.share)
+
+    @property
+    def epsilon(self):
+        if getattr(self, "_greedy_episode", False):
+            return self.config.epsilon_end
+        return super().epsilon
+
+
+class EzGreedy(GreedyEpisodes):
+    """Temporally extended epsilon-greedy (Dabney et al. 2021): an exploring step starts a random action that is
+    repeated for n ~ Zeta(mu) steps (the episode's end cuts it)."""
+
+    mu = 2.0
+
+    def _start_episode(self):
+        super()._start_episode()
+        self._repeat, self._repeat_action = 0, 0
+
+    def act(self, obs, pref, greedy=True):
+        if greedy or np.asarray(obs).shape != tuple(self.obs_shape):
+            return super().act(obs, pref, greedy)
+        if self._repeat == 0 and self.rng.random() < self.epsilon:
+            self._repeat, self._repeat_action = int(self.rng.zipf(self.mu)), int(self.rng.integers(self.n_actions))
+        if self._repeat > 0:
+            self._repeat -= 1
+            self._explored = np.array([True])
+            return self._repeat_action
+        return super().act(obs, pref, greedy=True)
+
+
+def option(flag: str, default: str) -> str:
+    return sys.argv[sys.argv.index(flag) + 1] if flag in sys.argv else default
+
+
+name, overrides = sys.argv[1], json.loads(sys.argv[2])
+if "double-components" in sys.argv[3:]:
+    ConvexQNetwork.double_q_values = staticmethod(double_components)
+    # the one-step path reads the convex head through forward_prefs; route it through the n-step code (n = 1)
+    targets.one_step_target = lambda q, t, buf, idx, w, acting, c: targets.n_step_target(q, t, buf, idx, w, acting,
+                                                                                          c, 1)
+env_id, seed, steps = option("--env", "deep-sea-treasure-v0"), int(option("--seed", "0")), \
+    int(option("--steps", "10000"))
+cfg = Config.from_dict({"env_id": env_id, "algo": "mope", "seed": seed, "total_steps": 20000, **overrides})
+GreedyEpisodes.share = float(option("--greedy-share", "0"))
+EzGreedy.mu = float(option("--ez", "0"))
+agent = (EzGreedy if EzGreedy.mu else GreedyEpisodes if GreedyEpisodes.share else MoPE)(env_id, cfg)
+if "tight-bounds" in sys.argv[3:]:
+    base = agent.env.unwrapped
+    sea = np.asarray(base.sea_map, dtype=np.float64)
+    low = min(0.0, float(getattr(base, "seabed_reward", 0.0)))
+    agent._q_high_t[0] = float(sea.max()) * cfg.reward_scale
+    agent._q_low_t[0] = low * cfg.reward_scale
+t = time.time()
+recs = agent.train(steps, eval_env=make_env(env_id), eval_every=1000)
+tr = np.round(agent.buffer.rewards[: agent.global_step, 0], 1)
+firsts = {float(v): int(np.argmax(tr == v)) + 1 for v in np.unique(tr[tr > 0])}
+first = next((int(r["step"]) for r in recs if r["cr"] >= 1 - 1e-9), None)
+out = {"probe": name, "env": env_id, "seed": seed, "patches": sys.argv[3:], "overrides": overrides,
+       "s": round(time.time() - t), "first_cr1": first,
+       "last_treasure_step": max(firsts.values()) if firsts else None, "treasures": len(firsts),
+       "cr": [round(float(r["cr"]), 2) for r in recs], "timeouts": [round(float(r["timeout_share"]), 2) for r in recs],
+       "path_error": [round(float(r["path_error"]), 3) for r in recs],
+       "over": [round(float(r["overestimation"]), 2) for r in recs]}
+print(json.dumps(out), flush=True)

@@ -26,7 +26,7 @@ import torch
 
 import mope
 from mope import Evaluator, MoPE, make_env
-from mope.cli import _parse_sets
+from mope.config import parse_overrides
 
 
 def cpu_model() -> str:
@@ -97,7 +97,7 @@ def main() -> None:
             rows.append((f"`{algo}` training, the defaults", s * 1000 / args.steps, "s / 1k steps"))
         ratio = rows[1][1] / rows[0][1]
         for spec in args.variant:
-            overrides = _parse_sets(spec.split(","))
+            overrides = parse_overrides(spec.split(","))
             s = time_training("mope", args.steps, args.repeats, **overrides) * 1000 / args.steps
             rows.append((f"`mope` training, {spec}", s, "s / 1k steps"))
             rows.append((f"ratio `mope` {spec} / `mope` defaults per step", s / rows[1][1], ""))

@@ -297,3 +297,27 @@ def test_a_config_saved_before_the_later_fields_keeps_the_values_it_ran_with() -
     assert {k: getattr(old, k) for k in LATER_FIELDS} == LATER_FIELDS
     partial = Config.from_dict({"q_head": "convex", "seed": 3})  # a user's overrides get today's defaults
     assert {k: getattr(partial, k) for k in LATER_FIELDS} == {k: getattr(Config(), k) for k in LATER_FIELDS}
+
+
+# ------------------------------------------------------------------------------------------- --set parsing
+def test_parse_overrides_reads_json_lists_presets_and_strings() -> None:
+    from mope.config import parse_overrides
+
+    got = parse_overrides(["n-step=5", "target_tau=0.01", "hidden_sizes=64,64", "disc_hidden=[16]",
+                           "obs_encoding=onehot", "double_q=false", "preset=paper", "max_episode_steps=null"])
+    assert got == {"n_step": 5, "target_tau": 0.01, "hidden_sizes": [64, 64], "disc_hidden": [16],
+                   "obs_encoding": "onehot", "double_q": False, "preset": "paper", "max_episode_steps": None}
+    assert Config.from_dict(got).n_step == 5
+
+
+@pytest.mark.parametrize(("items", "message"), [
+    (["n_step"], "'n_step' is not KEY=VALUE"),
+    (["n_stp=5"], "n_stp"),
+    (["hidden_sizes=a,b"], "comma-separated list of integers"),
+    (["preset=nope"], "nope"),
+])
+def test_parse_overrides_refuses_bad_items_by_name(items: list[str], message: str) -> None:
+    from mope.config import parse_overrides
+
+    with pytest.raises(ConfigError, match=message):
+        parse_overrides(items)

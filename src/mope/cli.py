@@ -12,7 +12,7 @@ from typing import Annotated, Any
 
 import typer
 
-from mope.config import ALGOS, PRESETS, Config, check_algo, check_preset, read_config_file, unknown_key_error
+from mope.config import ALGOS, PRESETS, Config, check_algo, parse_overrides, read_config_file
 from mope.errors import ConfigError, MopeError, one_line
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -22,33 +22,6 @@ app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_
 def _fail(message: str) -> None:
     typer.echo(f"error: {message}", err=True)
     raise typer.Exit(2)
-
-
-def _parse_sets(items: list[str]) -> dict[str, Any]:
-    """``KEY=VALUE`` pairs; VALUE is read as JSON when it parses (numbers, lists, null), else as a string."""
-    out: dict[str, Any] = {}
-    names = Config.field_names()
-    for item in items:
-        if "=" not in item:
-            raise ConfigError(f"--set '{item}' is not KEY=VALUE")
-        key, raw = item.split("=", 1)
-        key = key.strip().replace("-", "_")
-        if key == "preset":
-            out[key] = check_preset(raw.strip())
-            continue
-        if key not in names:
-            raise unknown_key_error(key)
-        try:
-            value = json.loads(raw)
-        except json.JSONDecodeError:
-            value = raw
-            if key in ("hidden_sizes", "disc_hidden"):
-                try:
-                    value = [int(x) for x in raw.split(",")]
-                except ValueError:
-                    raise ConfigError(f"--set {key}={raw!r} is not a comma-separated list of integers") from None
-        out[key] = value
-    return out
 
 
 _D = Config()
@@ -138,7 +111,7 @@ def _config_from_cli(config_file: Path | None, algo: str | None, flags: dict[str
     if preset is not None:
         settings["preset"] = preset
     settings.update({k: v for k, v in flags.items() if v is not None})
-    settings.update(_parse_sets(sets))
+    settings.update(parse_overrides(sets))
     variant = check_algo(algo or file_algo or ("mope" if not config_file else
                                                 Config.from_dict(settings).algo))
     for key in ("experience_exploration", "preference_exploration"):
@@ -293,7 +266,8 @@ def reproduce_dst_cmd(
     try:
         res = reproduce_dst(out, seeds=seeds, steps=steps, eval_every=eval_every,
                             algos=tuple(a.strip() for a in algos.split(",") if a.strip()), workers=workers, env_id=env,
-                            progress=progress, **{**_parse_sets(set_ or []), **({"device": device} if device else {})})
+                            progress=progress,
+                            **{**parse_overrides(set_ or []), **({"device": device} if device else {})})
     except MopeError as exc:
         _fail(str(exc))
         return
@@ -328,7 +302,7 @@ def reproduce_confrontation_cmd(
     try:
         res = reproduce_confrontation(out, seeds=seeds, steps=steps, ppo_prefs=ppo_prefs, eval_prefs=eval_prefs,
                                       episodes=episodes, workers=workers, progress=progress, ppo_budget=ppo_budget,
-                                      device=device, **_parse_sets(set_ or []))
+                                      device=device, **parse_overrides(set_ or []))
     except MopeError as exc:
         _fail(str(exc))
         return

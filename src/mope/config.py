@@ -441,6 +441,47 @@ def unknown_key_error(key: str) -> ConfigError:
     return ConfigError(f"unknown config key '{key}'{hint}")
 
 
+def parse_overrides(items: list[str]) -> dict[str, Any]:
+    """Config overrides from ``KEY=VALUE`` strings (the CLI's ``--set``).
+
+    VALUE is read as JSON when it parses (numbers, lists, null), else as a string; ``hidden_sizes`` and
+    ``disc_hidden`` also take ``256,256``. ``preset`` names a preset. Types and ranges are checked later, by
+    :class:`Config`.
+
+    Args:
+        items: ``KEY=VALUE`` strings; a dash in KEY reads as an underscore.
+
+    Returns:
+        The overrides by field name.
+
+    Raises:
+        ConfigError: An item is not ``KEY=VALUE``, KEY is no field, or a list of integers does not parse.
+    """
+    out: dict[str, Any] = {}
+    names = Config.field_names()
+    for item in items:
+        if "=" not in item:
+            raise ConfigError(f"--set '{item}' is not KEY=VALUE")
+        key, raw = item.split("=", 1)
+        key = key.strip().replace("-", "_")
+        if key == "preset":
+            out[key] = check_preset(raw.strip())
+            continue
+        if key not in names:
+            raise unknown_key_error(key)
+        try:
+            value = json.loads(raw)
+        except json.JSONDecodeError:
+            value = raw
+            if key in ("hidden_sizes", "disc_hidden"):
+                try:
+                    value = [int(x) for x in raw.split(",")]
+                except ValueError:
+                    raise ConfigError(f"--set {key}={raw!r} is not a comma-separated list of integers") from None
+        out[key] = value
+    return out
+
+
 def _parse_problem(exc: Exception) -> str:
     """A short description of a JSON or YAML parse error with its line and column."""
     problem = getattr(exc, "problem", None)  # yaml.MarkedYAMLError

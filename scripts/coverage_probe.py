@@ -2,7 +2,8 @@
 docs/results/early-loops). Each probe trains mope with the defaults plus JSON overrides and optional patches,
 evaluating every 1,000 steps, and prints one JSON line.
 
-    python scripts/coverage_probe.py NAME '{"config_key": value}' [tight-bounds] [double-components]
+    python scripts/coverage_probe.py NAME '{"config_key": value}' [tight-bounds] [double-components] [eval-target]
+        [return-bound]
         [--greedy-share P] [--ez MU] [--env ID] [--seed S] [--steps N]
 
 ``tight-bounds`` (not in mope): clamps targets to the map's own return bounds (first objective within
@@ -11,6 +12,10 @@ evaluating every 1,000 steps, and prints one JSON line.
 run the greedy policy's loops, so their real returns reach the targets).
 ``--ez MU`` (not in mope): temporally extended epsilon-greedy (Dabney et al. 2021): an exploring step repeats
 one random action for n ~ Zeta(MU) steps.
+``eval-target`` (not in mope): evaluations use the greedy policy of the target network (Polyak-averaged weights,
+tau = target_tau); the behaviour still acts with the online network.
+``return-bound`` (not in mope): every target row is raised to the episode's observed return where that is better
+for the row's preference (optimality tightening / self-imitation; valid in deterministic environments).
 ``double-components`` (not in mope): the online network picks the (action, component) pair and the target
 network's vector of that same pair is the value (double Q over the convex head's components too).
 """
@@ -76,6 +81,47 @@ class EzGreedy(GreedyEpisodes):
         return super().act(obs, pref, greedy=True)
 
 
+class ReturnBound(MoPE):
+    """Every target row is raised to the episode's observed return where that return is better for the row's
+    preference: ``y <- G if w^T G > w^T y`` (optimality tightening, He et al. 2017; self-imitation, Oh et al. 2018).
+    In a deterministic environment the return an episode obtained from (s, a) is achievable, so
+    ``w^T Q*(s, a, w) >= w^T G`` for every w. Only episodes that terminated carry a return (a time-out's partial
+    return misses the time costs to come)."""
+
+    def _init_bound(self):
+        if not hasattr(self, "_full"):
+            n = self.buffer.capacity
+            self._full = np.zeros((n, self.m), dtype=np.float32)
+            self._full_ok = np.zeros(n, dtype=bool)
+            self._slots = []
+
+    def collect_step(self):
+        self._init_bound()
+        slot = self.buffer.pos
+        self._full_ok[slot] = False
+        super().collect_step()
+        self._slots.append(slot)
+        if self._obs is not None and len(self._episode_actions) == 0:  # an episode just ended (a new one started)
+            slots = np.asarray(self._slots)
+            self._slots = []
+            if self.buffer.terminated[slots[-1]]:
+                r = self.buffer.rewards[slots] * self.config.reward_scale
+                g = np.zeros(self.m, dtype=np.float32)
+                for t in range(len(slots) - 1, -1, -1):
+                    g = r[t] + self.config.gamma * g
+                    self._full[slots[t]] = g
+                self._full_ok[slots] = True
+
+    def _envelope_target(self, batch, w, acting):
+        y = super()._envelope_target(batch, w, acting)
+        ok = self._full_ok[batch.indices]
+        if not ok.any():
+            return y
+        g = self._tensor(self._full[batch.indices])[:, None, :].expand_as(y)
+        better = ((w * g).sum(-1) > (w * y).sum(-1)) & self._tensor(ok, torch.bool)[:, None]
+        return torch.where(better[..., None], g, y)
+
+
 def option(flag: str, default: str) -> str:
     return sys.argv[sys.argv.index(flag) + 1] if flag in sys.argv else default
 
@@ -91,7 +137,23 @@ env_id, seed, steps = option("--env", "deep-sea-treasure-v0"), int(option("--see
 cfg = Config.from_dict({"env_id": env_id, "algo": "mope", "seed": seed, "total_steps": 20000, **overrides})
 GreedyEpisodes.share = float(option("--greedy-share", "0"))
 EzGreedy.mu = float(option("--ez", "0"))
-agent = (EzGreedy if EzGreedy.mu else GreedyEpisodes if GreedyEpisodes.share else MoPE)(env_id, cfg)
+agent_cls = EzGreedy if EzGreedy.mu else GreedyEpisodes if GreedyEpisodes.share else MoPE
+if "return-bound" in sys.argv[3:]:
+    agent_cls = type("ReturnBoundAgent", (ReturnBound, agent_cls), {})
+agent = agent_cls(env_id, cfg)
+if "eval-target" in sys.argv[3:]:  # evaluate the greedy policy of the Polyak-averaged (target) network
+    import mope.evaluation as _ev
+
+    _evaluate = _ev.Evaluator.evaluate
+
+    def _eval_target(self, ag, *a, **k):
+        ag.q_net, ag.target_net = ag.target_net, ag.q_net
+        try:
+            return _evaluate(self, ag, *a, **k)
+        finally:
+            ag.q_net, ag.target_net = ag.target_net, ag.q_net
+
+    _ev.Evaluator.evaluate = _eval_target
 if "tight-bounds" in sys.argv[3:]:
     base = agent.env.unwrapped
     sea = np.asarray(base.sea_map, dtype=np.float64)

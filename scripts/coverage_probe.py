@@ -3,7 +3,7 @@ docs/results/early-loops). Each probe trains mope with the defaults plus JSON ov
 evaluating every 1,000 steps, and prints one JSON line.
 
     python scripts/coverage_probe.py NAME '{"config_key": value}' [tight-bounds] [double-components] [eval-target]
-        [return-bound]
+        [return-bound] [loop-target]
         [--greedy-share P] [--ez MU] [--env ID] [--seed S] [--steps N]
 
 ``tight-bounds`` (not in mope): clamps targets to the map's own return bounds (first objective within
@@ -16,6 +16,8 @@ one random action for n ~ Zeta(MU) steps.
 tau = target_tau); the behaviour still acts with the online network.
 ``return-bound`` (not in mope): every target row is raised to the episode's observed return where that is better
 for the row's preference (optimality tightening / self-imitation; valid in deterministic environments).
+``loop-target`` (not in mope; n_step 1 only): a self-loop's target (s' = s) is its Bellman fixed point in closed
+form, max(loop for ever, leave by the best other action), not a bootstrap from its own value.
 ``double-components`` (not in mope): the online network picks the (action, component) pair and the target
 network's vector of that same pair is the value (double Q over the convex head's components too).
 """
@@ -122,6 +124,37 @@ class ReturnBound(MoPE):
         return torch.where(better[..., None], g, y)
 
 
+_one_step = targets.one_step_target
+
+
+@torch.no_grad()
+def loop_one_step(q_net, target_net, buf, idx, w, acting, cfg):
+    """Eq. 4's one-step target, except for self-loops (s' = s, not terminal): there the Bellman fixed point of the
+    taken action a is solved in closed form, ``max_w(r / (1 - gamma), r + gamma V_{-a}(s))`` (loop for ever, or
+    leave by the best other action), so a bump's target never bootstraps from its own value."""
+    y = _one_step(q_net, target_net, buf, idx, w, acting, cfg)
+    b = len(idx)
+    selfloop = (buf.obs[idx].reshape(b, -1) == buf.next_obs[idx].reshape(b, -1)).all(1) & (buf.terminated[idx] == 0)
+    if not selfloop.any():
+        return y
+    dev = w.device
+    sl = torch.as_tensor(selfloop, device=dev)
+    s_next = torch.as_tensor(buf.next_obs[idx][selfloop], device=dev, dtype=torch.float32)
+    ws = w[sl]
+    q_sel, q_tgt = q_net.forward_prefs(s_next, ws), target_net.forward_prefs(s_next, ws)  # (k, N, A, m)
+    a = torch.as_tensor(buf.actions[idx][selfloop], device=dev)
+    scores = torch.einsum("knm,knam->kna", ws, q_sel)
+    scores.scatter_(2, a.view(-1, 1, 1).expand(-1, scores.shape[1], 1), float("-inf"))
+    best = scores.argmax(2)
+    v_other = q_tgt.gather(2, best[..., None, None].expand(-1, -1, 1, q_tgt.shape[3])).squeeze(2)
+    r = torch.as_tensor(buf.rewards[idx][selfloop], device=dev, dtype=torch.float32)[:, None] * cfg.reward_scale
+    y_other = r + cfg.gamma * v_other
+    y_loop = (r / (1.0 - cfg.gamma)).expand_as(y_other)
+    loop = (ws * y_loop).sum(-1) > (ws * y_other).sum(-1)
+    y[sl] = torch.where(loop[..., None], y_loop, y_other)
+    return y
+
+
 def option(flag: str, default: str) -> str:
     return sys.argv[sys.argv.index(flag) + 1] if flag in sys.argv else default
 
@@ -141,6 +174,9 @@ agent_cls = EzGreedy if EzGreedy.mu else GreedyEpisodes if GreedyEpisodes.share 
 if "return-bound" in sys.argv[3:]:
     agent_cls = type("ReturnBoundAgent", (ReturnBound, agent_cls), {})
 agent = agent_cls(env_id, cfg)
+if "loop-target" in sys.argv[3:]:
+    assert overrides.get("n_step", 1) == 1, "loop-target patches the one-step target only"
+    targets.one_step_target = loop_one_step
 if "eval-target" in sys.argv[3:]:  # evaluate the greedy policy of the Polyak-averaged (target) network
     import mope.evaluation as _ev
 

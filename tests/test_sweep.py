@@ -113,6 +113,26 @@ def test_nothing_is_launched_for_a_bad_trial_or_environment(tmp_path: Path) -> N
     assert not any((tmp_path / d).exists() for d in "abc")
 
 
+@pytest.mark.parametrize(("text", "seeds"), [("3", [0, 1, 2]), ("5-9", [5, 6, 7, 8, 9]), ("0,5,7", [0, 5, 7]),
+                                            ("4-4", [4]), (2, [0, 1])])
+def test_seeds_option_takes_a_count_a_range_or_a_list(text, seeds) -> None:
+    assert apply_overrides(parse_spec(SPEC), seeds=text).seeds == seeds
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("9-5", "--seeds='9-5': the range ends before it starts"),
+    ("five", "--seeds='five' is not a count \\(5\\), a range \\(5-9\\) or a list of seeds \\(0,5,7\\)"),
+    ("5-", "--seeds='5-' is not a count"),
+    ("0", "--seeds=0 is out of range"),
+    ("-3", "--seeds=-3 is out of range"),
+    ("1,1", "--seeds=\\[1, 1\\] lists a seed twice"),
+    ("1,-2", "is not a seed count or a non-empty list of seeds >= 0"),
+])
+def test_bad_seeds_option_names_the_value(text, message) -> None:
+    with pytest.raises(SweepError, match=message):
+        apply_overrides(parse_spec(SPEC), seeds=text)
+
+
 def test_overrides_pin_grid_axes_and_seeds() -> None:
     spec = apply_overrides(parse_spec(SPEC), parse_set(["algo=mope", "total_steps=200", "hidden_sizes=[8, 8]"]),
                            seeds=3)

@@ -322,7 +322,8 @@ def sweep(
     workers: Annotated[int | None, typer.Option(help="Trials at once (default: all cores).")] = None,
     out: Annotated[Path | None, typer.Option(help="Sweep folder (default runs/<name>).")] = None,
     set_: Annotated[list[str] | None, typer.Option("--set", help="Override/pin: --set total_steps=5000.")] = None,
-    seeds: Annotated[int | None, typer.Option(help="Run seeds 0..N-1.")] = None,
+    seeds: Annotated[str | None, typer.Option(help="Seeds to run: N (0..N-1), a range 5-9, or a list 0,5,7.")
+                     ] = None,
     progress: Annotated[bool, typer.Option(help="Show the live summary.")] = True,
 ) -> None:
     """Run a grid of trainings; re-running skips finished trials and resumes interrupted ones."""

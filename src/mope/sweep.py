@@ -209,14 +209,38 @@ def load_spec(path: str | Path) -> SweepSpec:
         raise SweepError(f"sweep spec '{p}': {exc}") from None
 
 
-def apply_overrides(spec: SweepSpec, overrides: dict[str, Any] | None = None, seeds: int | None = None) -> SweepSpec:
+def parse_seeds(text: str | int) -> int | list[int]:
+    """``--seeds``: a count ``N`` (seeds ``0..N-1``), a range ``A-B`` (``A..B``, both included) or a list ``a,b,c``.
+
+    Raises:
+        SweepError: naming the text, if it is none of these (the range or list is checked by the spec's rules).
+    """
+    if isinstance(text, int):
+        return text
+    raw = str(text).strip()
+    try:
+        if "," in raw:
+            return [int(part) for part in raw.split(",")]
+        if "-" not in raw.lstrip("-"):
+            return int(raw)
+        lo, hi = (int(part) for part in raw.split("-", 1))
+    except ValueError:
+        raise SweepError(f"--seeds={raw!r} is not a count (5), a range (5-9) or a list of seeds (0,5,7)") from None
+    if hi < lo:
+        raise SweepError(f"--seeds={raw!r}: the range ends before it starts")
+    return list(range(lo, hi + 1))
+
+
+def apply_overrides(spec: SweepSpec, overrides: dict[str, Any] | None = None,
+                    seeds: int | str | list[int] | None = None) -> SweepSpec:
     """Return a copy of ``spec`` with command-line overrides.
 
     Args:
         spec: The spec.
         overrides: ``--set KEY=VALUE`` pairs; each goes into ``base``, and a key that is a grid axis pins that
             axis to the one value (``--set algo=mope`` runs only the MoPE half of the grid).
-        seeds: ``--seeds N``: run seeds ``0..N-1`` instead of the spec's.
+        seeds: ``--seeds``: run these seeds instead of the spec's: a count ``N`` (``0..N-1``), a range ``"5-9"``,
+            a list ``"0,5,7"`` or ``[0, 5, 7]`` (:func:`parse_seeds`).
     """
     base, grid = dict(spec.base), {k: list(v) for k, v in spec.grid.items()}
     names = ["algo", "preset", *Config.field_names()]
@@ -230,7 +254,7 @@ def apply_overrides(spec: SweepSpec, overrides: dict[str, Any] | None = None, se
         grid.pop(key, None)
         base[key] = value
     if seeds is not None:
-        new_seeds = _seed_list(seeds, "--seeds")
+        new_seeds = _seed_list(seeds if isinstance(seeds, list) else parse_seeds(seeds), "--seeds")
     return SweepSpec(spec.name, base, grid, new_seeds, dict(spec.arms))
 
 
@@ -413,7 +437,7 @@ def parse_set(items: Sequence[str] | None) -> dict[str, Any]:
 
 def sweep_command(spec_path: str | Path, out: str | Path | None = None, backend: str = "local",
                   address: str | None = None, workers: int | None = None, sets: Sequence[str] | None = None,
-                  seeds: int | None = None, progress: bool = True) -> list[TrialResult]:
+                  seeds: int | str | None = None, progress: bool = True) -> list[TrialResult]:
     """What ``mope sweep SPEC`` does: load the spec, apply ``--set``/``--seeds``, run, print one line per trial.
 
     Raises:

@@ -131,20 +131,28 @@ def greedy_tail_returns(rewards: np.ndarray, next_values: np.ndarray, greedy: np
     return out
 
 
-def mix_behaviour_returns(y: torch.Tensor, returns: torch.Tensor, fresh: torch.Tensor, weight: float) -> torch.Tensor:
-    """Blend the first row of each transition's targets (its own preference) with its greedy-tail return.
+def mix_behaviour_returns(y: torch.Tensor, returns: torch.Tensor, fresh: torch.Tensor, weight: float,
+                          rows: int = 1) -> torch.Tensor:
+    """Blend the first ``rows`` rows of each transition's targets with its greedy-tail return.
 
-    ``y[b, 0] <- (1 - weight) * y[b, 0] + weight * G_b`` where ``fresh[b]`` (G recent enough to be the current
-    greedy policy's); other rows and stale transitions keep the envelope target (eq. 4).
+    ``y[b, i] <- (1 - weight) * y[b, i] + weight * G_b`` for ``i < rows`` where ``fresh[b]`` (G recent enough to
+    be the current greedy policy's); other rows and stale transitions keep the envelope target (eq. 4). Row 0 is
+    the transition's own preference, whose greedy policy the episode followed. With EE the next rows are its
+    sigma_omega neighbours: one whose greedy policy is the same has the same return; for one whose policy differs,
+    G is (in a deterministic environment) a lower bound, and the blend pulls that row down by at most ``weight``
+    times the gap, small for a near preference. So G corrects a loop of the acting policy in all of these rows
+    at once instead of in one, which the envelope targets of the others outvote (docs/results/return-mix-near).
 
     Args:
         y: ``(B, N, m)`` targets; row 0 is the transition's own preference.
         returns: ``(B, m)`` greedy-tail returns (:func:`greedy_tail_returns`).
         fresh: ``(B,)`` bool.
         weight: Blend weight in [0, 1].
+        rows: How many leading rows to blend (1: the own preference only).
     """
     mixed = y.clone()
-    mixed[:, 0] = torch.where(fresh[:, None], (1.0 - weight) * y[:, 0] + weight * returns, y[:, 0])
+    head = y[:, :rows]
+    mixed[:, :rows] = torch.where(fresh[:, None, None], (1.0 - weight) * head + weight * returns[:, None], head)
     return mixed
 
 

@@ -296,13 +296,15 @@ def test_mix_behaviour_returns_blends_only_the_own_row_of_fresh_transitions() ->
     torch.testing.assert_close(out[1], y[1])
 
 
-def test_mix_behaviour_returns_blends_the_leading_rows_when_asked() -> None:
+def test_mix_behaviour_returns_blends_the_rows_a_mask_names() -> None:
     y = torch.arange(2 * 4 * 2, dtype=torch.float32).view(2, 4, 2)
     g = torch.tensor([[100.0, 100.0], [-100.0, -100.0]])
-    out = mix_behaviour_returns(y, g, torch.tensor([True, False]), 0.5, rows=3)
+    mask = torch.tensor([[True, True, True, False], [False, False, True, False]])
+    out = mix_behaviour_returns(y, g, mask, 0.5)
     torch.testing.assert_close(out[0, :3], 0.5 * y[0, :3] + 50.0)
     torch.testing.assert_close(out[0, 3], y[0, 3])
-    torch.testing.assert_close(out[1], y[1])
+    torch.testing.assert_close(out[1, 2], 0.5 * y[1, 2] - 50.0)
+    torch.testing.assert_close(out[1, [0, 1, 3]], y[1, [0, 1, 3]])
 
 
 def test_watkins_n_step_targets_hand_values() -> None:

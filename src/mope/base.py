@@ -141,7 +141,7 @@ class BaseAgent(AgentState):
         returns = losses.greedy_tail_returns(self.buffer.rewards[slots] * self.config.reward_scale, values,
                                              np.asarray(self._episode_greedy, dtype=bool), terminated,
                                              self.config.gamma)
-        self.buffer.set_returns(slots, returns, self.global_step)
+        self.buffer.set_returns(slots, returns, self.global_step, truncated=not terminated)
 
     def _start_episode(self) -> None:
         """Reset the training env (seeded by the episode count) and draw the episode's preference."""

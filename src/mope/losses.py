@@ -131,29 +131,23 @@ def greedy_tail_returns(rewards: np.ndarray, next_values: np.ndarray, greedy: np
     return out
 
 
-def mix_behaviour_returns(y: torch.Tensor, returns: torch.Tensor, fresh: torch.Tensor, weight: float,
-                          rows: int = 1) -> torch.Tensor:
-    """Blend the first ``rows`` rows of each transition's targets with its greedy-tail return.
+def mix_behaviour_returns(y: torch.Tensor, returns: torch.Tensor, fresh: torch.Tensor, weight: float
+                          ) -> torch.Tensor:
+    """Blend a transition's target rows with its greedy-tail return: ``y[b, i] <- (1 - weight) y[b, i] + weight G_b``.
 
-    ``y[b, i] <- (1 - weight) * y[b, i] + weight * G_b`` for ``i < rows`` where ``fresh[b]`` (G recent enough to
-    be the current greedy policy's); other rows and stale transitions keep the envelope target (eq. 4). Row 0 is
-    the transition's own preference, whose greedy policy the episode followed. With EE the next rows are its
-    sigma_omega neighbours: one whose greedy policy is the same has the same return; for one whose policy differs,
-    G is (in a deterministic environment) a lower bound, and the blend pulls that row down by at most ``weight``
-    times the gap, small for a near preference. So G corrects a loop of the acting policy in all of these rows
-    at once instead of in one, which the envelope targets of the others outvote (docs/results/return-mix-near).
+    ``fresh`` ``(B,)`` blends row 0 only (the transition's own preference, whose greedy policy the episode
+    followed) where G is recent enough to be the current greedy policy's; ``(B, N)`` says, row by row, which rows
+    to blend (``return_mix_near``: the sigma_omega neighbours' rows of a time-limited episode as well, see
+    :meth:`mope.agent.MoPE._envelope_target`). Other rows keep the envelope target (eq. 4).
 
     Args:
         y: ``(B, N, m)`` targets; row 0 is the transition's own preference.
         returns: ``(B, m)`` greedy-tail returns (:func:`greedy_tail_returns`).
-        fresh: ``(B,)`` bool.
+        fresh: ``(B,)`` or ``(B, N)`` bool.
         weight: Blend weight in [0, 1].
-        rows: How many leading rows to blend (1: the own preference only).
     """
-    mixed = y.clone()
-    head = y[:, :rows]
-    mixed[:, :rows] = torch.where(fresh[:, None, None], (1.0 - weight) * head + weight * returns[:, None], head)
-    return mixed
+    mask = fresh if fresh.dim() == 2 else torch.nn.functional.pad(fresh[:, None], (0, y.shape[1] - 1))
+    return torch.where(mask[..., None], (1.0 - weight) * y + weight * returns[:, None], y)
 
 
 def clip_targets(y: torch.Tensor, low: torch.Tensor, high: torch.Tensor) -> torch.Tensor:

@@ -290,7 +290,7 @@ def test_return_mix_pulls_a_looping_states_target_to_what_the_loop_returns():
     w = agent._tensor(agent.relabel(batch.prefs))
     y = agent._envelope_target(batch, w, agent._tensor(batch.prefs))
     expect = np.array([0.99 ** 40 * 30.0, -(1 - 0.99 ** 40) / 0.01])
-    assert agent.buffer.return_truncated[:40].all()  # a time-limited episode (a loop) ...
+    assert agent.buffer.return_to_limit[:40].all()  # a time-limited episode (a loop) ...
     near = 1 + agent.config.n_similar  # ... with return_mix_near: the sigma_omega neighbours' rows learn it too
     assert near == 4 and w.shape[1] == 8
     np.testing.assert_allclose(y[:, :near].numpy(), np.tile(expect, (8, near, 1)), rtol=1e-4)
@@ -300,10 +300,10 @@ def test_return_mix_pulls_a_looping_states_target_to_what_the_loop_returns():
     np.testing.assert_allclose(y_own[:, 0].numpy(), np.tile(expect, (8, 1)), rtol=1e-4)
     assert (y_own[:, 1:, 0] > 29.0).all()
     agent.config.return_mix_near = True
-    agent.buffer.return_truncated[:] = False  # had the episode terminated: its own row only
+    agent.buffer.return_to_limit[:] = False  # had the episode terminated: its own row only
     y_term = agent._envelope_target(batch, w, agent._tensor(batch.prefs))
     torch.testing.assert_close(y_term, y_own)
-    agent.buffer.return_truncated[:] = True
+    agent.buffer.return_to_limit[:] = True
     agent.global_step = 40 + 50  # the return is now stale: eq. 4 alone
     y_stale = agent._envelope_target(batch, w, agent._tensor(batch.prefs))
     assert (y_stale[:, 0, 0] > 29.0).all()

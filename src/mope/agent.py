@@ -307,10 +307,10 @@ class MoPE(BaseAgent):
     def _envelope_target(self, batch: Batch, w: torch.Tensor, acting: torch.Tensor) -> torch.Tensor:
         """Target y of eq. 4 (:mod:`mope.targets`: one step, or ``n_step`` with each row's Watkins cut), clamped
         to the return bounds and, with ``return_mix``, blended with the behaviour's greedy-tail returns: in the
-        transition's own row, and with ``return_mix_near``, where its episode hit the time limit (a greedy loop),
-        in its sigma_omega neighbours' rows too. A neighbour that follows the same loop has the same return, and
-        one return then corrects the loop in all of them at once instead of in one row that the envelope
-        targets of the neighbours outvote (docs/results/return-mix-near)."""
+        transition's own row, and with ``return_mix_near``, where that return is a greedy run to the time limit
+        (a loop: ``ReplayBuffer.return_to_limit``), in its sigma_omega neighbours' rows too. A neighbour that
+        follows the same loop has the same return, and one return then corrects the loop in all of them at once
+        instead of in one row that the envelope targets of the neighbours outvote (docs/results/return-mix-near)."""
         c = self.config
         if c.n_step > 1:
             y = targets.n_step_target(self.q_net, self.target_net, self.buffer, batch.indices, w, acting, c, c.n_step)
@@ -322,7 +322,7 @@ class MoPE(BaseAgent):
             rows = np.zeros(y.shape[:2], dtype=bool)
             rows[:, 0] = fresh
             if c.return_mix_near:
-                rows[:, 1:1 + c.n_similar] = (fresh & self.buffer.return_truncated[batch.indices])[:, None]
+                rows[:, 1:1 + c.n_similar] = (fresh & self.buffer.return_to_limit[batch.indices])[:, None]
             y = losses.mix_behaviour_returns(y, self._tensor(self.buffer.returns[batch.indices]),
                                              self._tensor(rows, torch.bool), c.return_mix)
         return y

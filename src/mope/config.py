@@ -205,8 +205,8 @@ class Config:
     #: mope.losses.greedy_tail_returns; docs/results/return-mix); returns older than return_window are not used.
     return_mix: float = 0.5
     return_window: int = 2_000
-    #: With experience exploration, blend the return of an episode that hit the time limit (a greedy loop) into
-    #: the rows of the acting preference's sigma_omega neighbours too, not only into its own row
+    #: With experience exploration, blend a return that is a greedy run to the time limit (a loop) into the
+    #: rows of the acting preference's sigma_omega neighbours too, not only into its own row
     #: (docs/results/return-mix-near); no effect on eql or pe, which have no such rows.
     return_mix_near: bool = False
     #: Stored steps of reward in every target row, each row cut at its own first non-greedy action

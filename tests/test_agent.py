@@ -271,8 +271,7 @@ def test_return_mix_pulls_a_looping_states_target_to_what_the_loop_returns():
     """A greedy policy that bumps the seabed's wall forever: with an inflated value at s' the envelope target
     of eq. 4 is inflated too; return_mix blends in the loop's own return (time-limited), so the target of the
     acting preference's row drops toward the truth, and only for fresh returns."""
-    agent = MoPE("deep-sea-treasure-v0", **{**SMALL, "per": False, "seed": 0}, return_mix=1.0, return_window=50,
-                  return_mix_near=True)
+    agent = MoPE("deep-sea-treasure-v0", **{**SMALL, "per": False, "seed": 0}, return_mix=1.0, return_window=50)
     inflate = [m for m in agent.target_net.modules() if isinstance(m, torch.nn.Linear)][-1]
     with torch.no_grad():  # every component of every action worth (30, 0) at every state
         inflate.weight.zero_()
@@ -290,25 +289,11 @@ def test_return_mix_pulls_a_looping_states_target_to_what_the_loop_returns():
     w = agent._tensor(agent.relabel(batch.prefs))
     y = agent._envelope_target(batch, w, agent._tensor(batch.prefs))
     expect = np.array([0.99 ** 40 * 30.0, -(1 - 0.99 ** 40) / 0.01])
-    assert agent.buffer.return_to_limit[:40].all()  # a time-limited episode (a loop) ...
-    near = 1 + agent.config.n_similar  # ... with return_mix_near: the sigma_omega neighbours' rows learn it too
-    assert near == 4 and w.shape[1] == 8
-    np.testing.assert_allclose(y[:, :near].numpy(), np.tile(expect, (8, near, 1)), rtol=1e-4)
-    assert (y[:, near:, 0] > 29.0).all()  # the broad rows keep eq. 4's (inflated) target
-    agent.config.return_mix_near = False  # the own row only
-    y_own = agent._envelope_target(batch, w, agent._tensor(batch.prefs))
-    np.testing.assert_allclose(y_own[:, 0].numpy(), np.tile(expect, (8, 1)), rtol=1e-4)
-    assert (y_own[:, 1:, 0] > 29.0).all()
-    agent.config.return_mix_near = True
-    agent.buffer.return_to_limit[:] = False  # had the episode terminated: its own row only
-    y_term = agent._envelope_target(batch, w, agent._tensor(batch.prefs))
-    torch.testing.assert_close(y_term, y_own)
-    agent.buffer.return_to_limit[:] = True
+    np.testing.assert_allclose(y[:, 0].numpy(), np.tile(expect, (8, 1)), rtol=1e-4)
+    assert (y[:, 1:, 0] > 29.0).all()  # the other preferences' rows keep eq. 4's (inflated) target
     agent.global_step = 40 + 50  # the return is now stale: eq. 4 alone
     y_stale = agent._envelope_target(batch, w, agent._tensor(batch.prefs))
     assert (y_stale[:, 0, 0] > 29.0).all()
-    eql = EQL("deep-sea-treasure-v0", **SMALL, return_mix_near=True)  # no similar-preference rows: own row only
-    assert eql.config.n_similar == 0
 
 
 def _n_step_agent(**overrides):

@@ -138,11 +138,10 @@ class BaseAgent(AgentState):
         q = self.target_net(self._tensor(self.buffer.next_obs[slots]), w)  # (T, A, m)
         best = torch.einsum("tm,tam->ta", w, q).argmax(dim=1)
         values = q[torch.arange(len(slots), device=q.device), best].cpu().numpy()
-        greedy = np.asarray(self._episode_greedy, dtype=bool)
         returns = losses.greedy_tail_returns(self.buffer.rewards[slots] * self.config.reward_scale, values,
-                                             greedy, terminated, self.config.gamma)
-        uncut = np.append(np.logical_and.accumulate(greedy[:0:-1])[::-1], True)  # every later action greedy
-        self.buffer.set_returns(slots, returns, self.global_step, to_limit=uncut & (not terminated))
+                                             np.asarray(self._episode_greedy, dtype=bool), terminated,
+                                             self.config.gamma)
+        self.buffer.set_returns(slots, returns, self.global_step)
 
     def _start_episode(self) -> None:
         """Reset the training env (seeded by the episode count) and draw the episode's preference."""

@@ -112,9 +112,6 @@ class ReplayBuffer:
         #: (``NO_RETURN``: none); written by :meth:`set_returns` when an episode ends.
         self.returns = np.zeros((capacity, n_objectives), dtype=np.float32)
         self.return_steps = np.full(capacity, NO_RETURN, dtype=np.int64)
-        #: Whether that return is a greedy run to the time limit: the episode was not terminated and no action
-        #: after the transition's own was random (a loop of the greedy policy, or a wander, run to the end).
-        self.return_to_limit = np.zeros(capacity, dtype=bool)
         self.tree = SumTree(capacity) if prioritized else None
         self.max_priority = 1.0
         self.pos = 0
@@ -138,7 +135,6 @@ class ReplayBuffer:
         self.terminated[i] = float(terminated)
         self.dones[i] = terminated if done is None else done
         self.return_steps[i] = NO_RETURN
-        self.return_to_limit[i] = False
         if self.tree is not None:
             self.tree.update(np.array([i]), np.array([self.max_priority]))
         self.pos = (i + 1) % self.capacity
@@ -183,13 +179,10 @@ class ReplayBuffer:
             valid[:, 1:] = np.logical_and.accumulate(cont, axis=1)
         return slots, valid
 
-    def set_returns(self, idx: np.ndarray, returns: np.ndarray, step: int, to_limit: np.ndarray | bool = False
-                    ) -> None:
-        """Store the returns of a finished episode's transitions (slots ``idx``), computed at ``step``;
-        ``to_limit``: which of them are greedy runs to the time limit (see ``return_to_limit``)."""
+    def set_returns(self, idx: np.ndarray, returns: np.ndarray, step: int) -> None:
+        """Store the returns of a finished episode's transitions (slots ``idx``), computed at ``step``."""
         self.returns[idx] = returns
         self.return_steps[idx] = step
-        self.return_to_limit[idx] = to_limit
 
     def update_priorities(self, idx: np.ndarray, priorities: np.ndarray) -> None:
         """Set new priorities (already raised to alpha) for sampled indices."""
@@ -206,8 +199,7 @@ class ReplayBuffer:
             "actions": self.actions[:n].copy(), "rewards": self.rewards[:n].copy(),
             "terminated": self.terminated[:n].copy(), "dones": self.dones[:n].copy(),
             "returns": self.returns[:n].copy(),
-            "return_steps": self.return_steps[:n].copy(), "return_to_limit": self.return_to_limit[:n].copy(),
-            "pos": self.pos, "full": self.full,
+            "return_steps": self.return_steps[:n].copy(), "pos": self.pos, "full": self.full,
             "max_priority": self.max_priority,
         }
         if self.tree is not None:
@@ -219,7 +211,7 @@ class ReplayBuffer:
         n = len(state["actions"])
         for key in ("obs", "next_obs", "prefs", "actions", "rewards", "terminated"):
             getattr(self, key)[:n] = np.asarray(state[key])
-        for key in ("returns", "return_steps", "return_to_limit"):  # absent from checkpoints before them
+        for key in ("returns", "return_steps"):  # absent from checkpoints before return_mix
             if key in state:
                 getattr(self, key)[:n] = np.asarray(state[key])
         if "dones" in state:

@@ -4,7 +4,8 @@ defaults: overestimate 24.6 at 8k, 121.9 at 9k). Each probe changes one thing; 9
     python scripts/mirrored_probe.py NAME '{"config_key": value}' [double-components|act-target|--beta B|--lam L]
         [--env ID] [--seed S] [--steps N]
 
-``near-returns`` (not in mope): see :class:`NearReturns`. ``--eval-every K`` evaluates every K steps.
+``near-returns``, ``near-same`` (not in mope): see :class:`NearReturns`, :class:`NearSameReturns`.
+``--eval-every K`` evaluates every K steps.
 ``act-target`` (not in mope) acts and evaluates with the target network, the Polyak average of the online weights.
 ``double-components`` (not in mope): with the convex head, the target network picks its own best component
 (a max over C noisy vectors that double Q does not cover); this variant selects the component with the online
@@ -163,6 +164,29 @@ class NearReturns(MoPE):
         return y
 
 
+class NearSameReturns(MoPE):
+    """Like :class:`NearReturns`, but a neighbour's row gets the return only where the online network's greedy
+    (action, component) at s' under the neighbour is the acting preference's: the neighbour is predicted to
+    continue as the episode did, so G is its return, not a lower bound across a change of policy (the bias that
+    cost Deep-Sea-Treasure precision, docs/results/return-mix-near). Not in mope."""
+
+    @torch.no_grad()
+    def _envelope_target(self, batch, w, acting):
+        y = super()._envelope_target(batch, w, acting)  # row 0 already mixed (return_mix)
+        c = self.config
+        n_near = c.n_omega - 1 - min(c.n_omega - 1, round(c.n_omega * c.relabel_broad))
+        fresh = self.global_step - self.buffer.return_steps[batch.indices] < c.return_window
+        if not (c.return_mix and n_near and fresh.any()):
+            return y
+        comps = self.q_net.components(self._tensor(batch.next_obs))[:, 0]  # (B, A, C, m), one head
+        pick = torch.einsum("bkm,bacm->bkac", w, comps).flatten(2).argmax(2)  # (B, N) greedy (action, component)
+        same = pick == pick[:, :1]
+        mask = torch.zeros_like(same)
+        mask[:, 1:1 + n_near] = same[:, 1:1 + n_near] & self._tensor(fresh, torch.bool)[:, None]
+        g = self._tensor(self.buffer.returns[batch.indices])[:, None, :]
+        return torch.where(mask[..., None], (1.0 - c.return_mix) * y + c.return_mix * g, y)
+
+
 def option(flag: str, default: str) -> str:
     return sys.argv[sys.argv.index(flag) + 1] if flag in sys.argv else default
 
@@ -172,7 +196,8 @@ CountPessimism.beta = float(option("--beta", "1"))
 GreedyReturns.lam = float(option("--lam", "0.5"))
 GreedyReturns.window = int(option("--window", "2000"))
 variants = {"--lam": GreedyReturns, "--beta": CountPessimism, "double-components": DoubleComponents,
-            "act-target": ActTarget, "near-returns": NearReturns}
+            "act-target": ActTarget, "near-returns": NearReturns,
+            "near-same": NearSameReturns}
 cls = next((v for flag, v in variants.items() if flag in sys.argv[3:]), MoPE)
 env_id, seed, steps = option("--env", "deep-sea-treasure-mirrored-v0"), int(option("--seed", "2")), \
     int(option("--steps", "9000"))

@@ -348,29 +348,3 @@ def test_n_step_must_be_positive():
         MoPE("deep-sea-treasure-v0", n_step=0)
     with pytest.raises(mope.ConfigError, match="n_step=100000 is out of range"):
         MoPE("deep-sea-treasure-v0", n_step=100_000)
-
-
-class _TwoVectors(torch.nn.Module):
-    """A stand-in Q-network: at every state, action 0 is worth (10, 0) and action 1 is worth (0, 10)."""
-
-    def forward_prefs(self, obs: torch.Tensor, prefs: torch.Tensor) -> torch.Tensor:
-        b, k, _ = prefs.shape
-        return torch.tensor([[10.0, 0.0], [0.0, 10.0]]).expand(b, k, 2, 2)
-
-
-def test_return_rows_share_the_return_only_with_neighbours_that_continue_alike():
-    """Row 0 (the acting preference (0.6, 0.4)) prefers action 0; neighbour (0.55, 0.45) does too and gets the
-    return; neighbour (0.45, 0.55) prefers action 1, so the return is only a lower bound for it: left out, as is the
-    broad row 3 and every row of a stale transition."""
-    w = torch.tensor([[[0.6, 0.4], [0.55, 0.45], [0.45, 0.55], [0.7, 0.3]]]).repeat(2, 1, 1)
-    fresh = torch.tensor([True, False])
-    rows = targets.return_rows(_TwoVectors(), torch.zeros(2, 2), w, fresh, n_similar=2)
-    assert rows.tolist() == [[True, True, False, False], [False, False, False, False]]
-    own = targets.return_rows(_TwoVectors(), torch.zeros(2, 2), w, fresh, n_similar=0)
-    assert own.tolist() == [[True, False, False, False], [False, False, False, False]]
-
-
-def test_return_mix_near_is_off_by_default_and_idle_without_similar_rows():
-    assert not Config().return_mix_near
-    assert Config(return_mix_near=True).n_similar == 15  # N_omega 32, half of them broad
-    assert EQL("deep-sea-treasure-v0", **SMALL, return_mix_near=True).config.n_similar == 0

@@ -296,17 +296,6 @@ def test_mix_behaviour_returns_blends_only_the_own_row_of_fresh_transitions() ->
     torch.testing.assert_close(out[1], y[1])
 
 
-def test_mix_behaviour_returns_blends_the_rows_a_mask_names() -> None:
-    y = torch.arange(2 * 4 * 2, dtype=torch.float32).view(2, 4, 2)
-    g = torch.tensor([[100.0, 100.0], [-100.0, -100.0]])
-    mask = torch.tensor([[True, True, True, False], [False, False, True, False]])
-    out = mix_behaviour_returns(y, g, mask, 0.5)
-    torch.testing.assert_close(out[0, :3], 0.5 * y[0, :3] + 50.0)
-    torch.testing.assert_close(out[0, 3], y[0, 3])
-    torch.testing.assert_close(out[1, 2], 0.5 * y[1, 2] - 50.0)
-    torch.testing.assert_close(out[1, [0, 1, 3]], y[1, [0, 1, 3]])
-
-
 def test_watkins_n_step_targets_hand_values() -> None:
     """Three steps of rewards 1, 2, 3 (one objective), values after each step 10, 20, 30, gamma 0.5. Row 0 follows
     every step; row 1 is cut before step 1 (its greedy action differs from the stored one); row 2 before step 2."""

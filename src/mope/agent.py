@@ -241,8 +241,8 @@ class MoPE(BaseAgent):
             if c.return_mix:  # the row that learns the behaviour's return is the transition's own preference
                 rows[:, 0] = acting_prefs
             return rows
-        n_broad = c.n_omega - 1 - c.n_similar
-        near = sample_neighbours(acting_prefs, c.n_similar, c.sigma_omega, self.rng)
+        n_broad = min(c.n_omega - 1, round(c.n_omega * c.relabel_broad))
+        near = sample_neighbours(acting_prefs, c.n_omega - 1 - n_broad, c.sigma_omega, self.rng)
         rows = [acting_prefs[:, None, :].astype(np.float64), near]
         if n_broad:
             rows.append(sample_simplex(b * n_broad, self.m, self.rng).reshape(b, n_broad, self.m))
@@ -306,8 +306,7 @@ class MoPE(BaseAgent):
     @torch.no_grad()
     def _envelope_target(self, batch: Batch, w: torch.Tensor, acting: torch.Tensor) -> torch.Tensor:
         """Target y of eq. 4 (:mod:`mope.targets`: one step, or ``n_step`` with each row's Watkins cut), clamped
-        to the return bounds and, with ``return_mix``, blended with the behaviour's greedy-tail returns in the rows
-        :func:`mope.targets.return_rows` names."""
+        to the return bounds and, with ``return_mix``, blended with the behaviour's greedy-tail returns."""
         c = self.config
         if c.n_step > 1:
             y = targets.n_step_target(self.q_net, self.target_net, self.buffer, batch.indices, w, acting, c, c.n_step)
@@ -316,9 +315,8 @@ class MoPE(BaseAgent):
         y = losses.clip_targets(y, self._q_low_t, self._q_high_t) if c.clip_targets else y
         if c.return_mix:
             fresh = self.global_step - self.buffer.return_steps[batch.indices] < c.return_window
-            rows = targets.return_rows(self.q_net, self._tensor(batch.next_obs), w, self._tensor(fresh, torch.bool),
-                                       c.n_similar if c.return_mix_near else 0)
-            y = losses.mix_behaviour_returns(y, self._tensor(self.buffer.returns[batch.indices]), rows, c.return_mix)
+            y = losses.mix_behaviour_returns(y, self._tensor(self.buffer.returns[batch.indices]),
+                                             self._tensor(fresh, torch.bool), c.return_mix)
         return y
 
     def _gradient_step(self, loss: torch.Tensor) -> None:

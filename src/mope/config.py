@@ -59,7 +59,7 @@ PRESETS: dict[str, dict[str, Any]] = {
 #: Fields added after mope 0.2.0, with the values that reproduce the runs saved before them: a saved config (it has
 #: every other field) that lacks them is read with these values, not with today's defaults.
 LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0, "reward_scale": 1.0,
-                                "return_mix": 0.0, "return_window": 2_000, "n_step": 1, "return_mix_near": False}
+                                "return_mix": 0.0, "return_window": 2_000, "n_step": 1}
 
 
 def check_preset(name: str) -> str:
@@ -205,10 +205,6 @@ class Config:
     #: mope.losses.greedy_tail_returns; docs/results/return-mix); returns older than return_window are not used.
     return_mix: float = 0.5
     return_window: int = 2_000
-    #: With experience exploration, blend the return into the rows of the acting preference's sigma_omega
-    #: neighbours too, where the online network's greedy action and return vector at s' are the acting
-    #: preference's (mope.targets.return_rows; docs/results/return-mix-near); no effect on eql or pe.
-    return_mix_near: bool = False
     #: Stored steps of reward in every target row, each row cut at its own first non-greedy action
     #: (mope.losses.watkins_n_step_targets; docs/results/n-step). 1: the one-step target of eq. 4.
     n_step: int = 1
@@ -272,13 +268,6 @@ class Config:
         """Name of the variant: ``eql``, ``ee``, ``pe`` or ``mope``."""
         flags = (self.experience_exploration, self.preference_exploration)
         return next(name for name, f in ALGOS.items() if f == flags)
-
-    @property
-    def n_similar(self) -> int:
-        """Relabeled rows drawn within sigma_omega of the transition's own preference (rows 1..n_similar; EE)."""
-        if not self.experience_exploration:
-            return 0
-        return self.n_omega - 1 - min(self.n_omega - 1, round(self.n_omega * self.relabel_broad))
 
     @classmethod
     def for_algo(cls, algo: str, **overrides: Any) -> Config:

@@ -131,22 +131,21 @@ def greedy_tail_returns(rewards: np.ndarray, next_values: np.ndarray, greedy: np
     return out
 
 
-def mix_behaviour_returns(y: torch.Tensor, returns: torch.Tensor, fresh: torch.Tensor, weight: float
-                          ) -> torch.Tensor:
-    """Blend a transition's target rows with its greedy-tail return: ``y[b, i] <- (1 - weight) y[b, i] + weight G_b``.
+def mix_behaviour_returns(y: torch.Tensor, returns: torch.Tensor, fresh: torch.Tensor, weight: float) -> torch.Tensor:
+    """Blend the first row of each transition's targets (its own preference) with its greedy-tail return.
 
-    ``fresh`` ``(B,)`` blends row 0 only (the transition's own preference, whose greedy policy the episode
-    followed) where G is recent enough to be the current greedy policy's; ``(B, N)`` says row by row which rows to
-    blend (:func:`mope.targets.return_rows`). Other rows keep the envelope target (eq. 4).
+    ``y[b, 0] <- (1 - weight) * y[b, 0] + weight * G_b`` where ``fresh[b]`` (G recent enough to be the current
+    greedy policy's); other rows and stale transitions keep the envelope target (eq. 4).
 
     Args:
         y: ``(B, N, m)`` targets; row 0 is the transition's own preference.
         returns: ``(B, m)`` greedy-tail returns (:func:`greedy_tail_returns`).
-        fresh: ``(B,)`` or ``(B, N)`` bool.
+        fresh: ``(B,)`` bool.
         weight: Blend weight in [0, 1].
     """
-    mask = fresh if fresh.dim() == 2 else torch.nn.functional.pad(fresh[:, None], (0, y.shape[1] - 1))
-    return torch.where(mask[..., None], (1.0 - weight) * y + weight * returns[:, None], y)
+    mixed = y.clone()
+    mixed[:, 0] = torch.where(fresh[:, None], (1.0 - weight) * y[:, 0] + weight * returns, y[:, 0])
+    return mixed
 
 
 def clip_targets(y: torch.Tensor, low: torch.Tensor, high: torch.Tensor) -> torch.Tensor:

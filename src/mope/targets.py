@@ -78,34 +78,3 @@ def values_after(q_net: nn.Module, target_net: nn.Module, next_obs: torch.Tensor
     if cfg.envelope_prefs not in ("relabel", "own"):  # the envelope set is not the rows': Q at the rows' own
         q_online = q_net.forward_prefs(next_obs, w_rep)
     return values, torch.einsum("xim,xiam->xia", w_rep, q_online).argmax(dim=2)
-
-
-@torch.no_grad()
-def return_rows(q_net: nn.Module, next_obs: torch.Tensor, w: torch.Tensor, fresh: torch.Tensor, n_similar: int
-                ) -> torch.Tensor:
-    """Which target rows learn the behaviour's greedy-tail return (``return_mix``): ``(B, N)`` bool.
-
-    Row 0, the transition's own preference, where the return is fresh. With ``n_similar`` > 0
-    (``return_mix_near``) also each of the next ``n_similar`` rows (EE's sigma_omega neighbours) whose greedy action
-    at s' and its return vector, under the online network, are row 0's: that neighbour is predicted to continue
-    as the episode did, so the return is its own. A neighbour predicted to change policy is left out, as the
-    return would be only a lower bound for it (docs/results/return-mix-near). The point is a loop of the acting
-    preference's greedy policy on a spurious return vector: its neighbours share the loop, and without this one
-    corrected row is outvoted by their envelope targets.
-
-    Args:
-        q_net: The online network.
-        next_obs: ``(B, ...)`` the transitions' next observations.
-        w: ``(B, N, m)`` row preferences; row 0 the transition's own.
-        fresh: ``(B,)`` whether each transition's return is fresh.
-        n_similar: Neighbour rows after row 0 that may learn the return (0: row 0 only).
-    """
-    rows = torch.zeros(w.shape[:2], dtype=torch.bool, device=w.device)
-    rows[:, 0] = fresh
-    if n_similar:
-        q = q_net.forward_prefs(next_obs, w[:, :1 + n_similar])  # (B, 1 + n, A, m)
-        best = torch.einsum("bkm,bkam->bka", w[:, :1 + n_similar], q).argmax(dim=2)
-        v = q.gather(2, best[..., None, None].expand(*best.shape, 1, q.shape[-1])).squeeze(2)  # (B, 1 + n, m)
-        same = (best == best[:, :1]) & (v == v[:, :1]).all(dim=-1)
-        rows[:, 1:1 + n_similar] = same[:, 1:] & fresh[:, None]
-    return rows

@@ -147,8 +147,8 @@ class GreedyReturns(MoPE):
 class NearReturns(MoPE):
     """``return_mix`` applied to the acting preference's similar-preference rows as well (EE's sigma_omega
     neighbours, rows 1 .. N_omega - 1 - broad), not only to its own row 0: a neighbour that follows the same greedy
-    policy has the same return, and one that does not has at least it (a deterministic environment), so the
-    episode's return corrects a loop 16 rows at a time instead of one. Not in mope."""
+    policy has the same return (for one that does not, G is only a lower bound, in a deterministic environment), so
+    the episode's return corrects a loop 16 rows at a time instead of one. Not in mope."""
 
     def _envelope_target(self, batch, w, acting):
         y = super()._envelope_target(batch, w, acting)  # row 0 already mixed (return_mix)

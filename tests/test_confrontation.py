@@ -294,21 +294,28 @@ def test_mope_agent_trains_and_evaluates_on_the_discrete_id() -> None:
 
 @pytest.mark.slow
 def test_a_short_training_beats_random_red() -> None:
-    """5k steps of the default MoPE learner: blue wins far less often than against random red (0.86 over these
-    reset seeds), and red's discounted catch return is higher than random red's."""
+    """5k steps of the default MoPE learner, seeds 0-2: on average over the seeds blue wins far less often than
+    against random red (0.86 over these reset seeds), and red's discounted catch return is higher than random red's.
+
+    Three seeds, not one: a single seed's outcome depends on the CPU (runs are deterministic on one machine, not
+    across machines). Seed 0 alone had loss share 0.48 on the AMD EPYC development machine and 0.78 on an Intel
+    Xeon one, where seeds 1 and 2 had 0.60 and 0.52 (2026-12-04).
+    """
     from mope.agent import MoPE
     from mope.envs.confrontation_batch import play_reference
     from mope.evaluation import Evaluator
 
-    agent = MoPE(C.DISCRETE_ID, seed=0, total_steps=5000)
-    agent.train(5000)
-    ev = Evaluator(make_env(C.DISCRETE_ID), C.DISCRETE_ID, 0.99, n_prefs=50, seed=0, max_steps=150,
-                   ref_point=C.reference_point(0.99, 150))
-    res, sols = ev.evaluate(agent)
     _, disc, outcomes = play_reference("random", list(range(200)))
     random_loss = outcomes.count("blue_win") / len(outcomes)
     assert random_loss >= 0.8
-    # on the development machine, before return_mix: loss share 0.48 (4k steps: 0.68), r_catch -9.9 against
-    # random's -11.3
-    assert res["loss_share"] <= random_loss - 0.15, (res["loss_share"], random_loss)
-    assert sols.discounted[:, 0].mean() >= disc[:, 0].mean() + 0.5, (sols.discounted[:, 0].mean(), disc[:, 0].mean())
+    ev = Evaluator(make_env(C.DISCRETE_ID), C.DISCRETE_ID, 0.99, n_prefs=50, seed=0, max_steps=150,
+                   ref_point=C.reference_point(0.99, 150))
+    losses, catches = [], []
+    for seed in range(3):
+        agent = MoPE(C.DISCRETE_ID, seed=seed, total_steps=5000)
+        agent.train(5000)
+        res, sols = ev.evaluate(agent)
+        losses.append(res["loss_share"])
+        catches.append(float(sols.discounted[:, 0].mean()))
+    assert np.mean(losses) <= random_loss - 0.15, (losses, random_loss)
+    assert np.mean(catches) >= disc[:, 0].mean() + 0.5, (catches, disc[:, 0].mean())

@@ -144,6 +144,11 @@ class GreedyReturns(MoPE):
         return y
 
 
+def similar_rows(c: Config) -> int:
+    """EE's similar-preference rows after row 0 (the agent's relabel: N_omega - 1 - the broad rows)."""
+    return c.n_omega - 1 - min(c.n_omega - 1, round(c.n_omega * c.relabel_broad))
+
+
 class NearReturns(MoPE):
     """``return_mix`` applied to the acting preference's similar-preference rows as well (EE's sigma_omega
     neighbours, rows 1 .. N_omega - 1 - broad), not only to its own row 0: a neighbour that follows the same greedy
@@ -153,7 +158,7 @@ class NearReturns(MoPE):
     def _envelope_target(self, batch, w, acting):
         y = super()._envelope_target(batch, w, acting)  # row 0 already mixed (return_mix)
         c = self.config
-        n_near = c.n_omega - 1 - min(c.n_omega - 1, round(c.n_omega * c.relabel_broad))
+        n_near = similar_rows(c)
         fresh = self.global_step - self.buffer.return_steps[batch.indices] < c.return_window
         if c.return_mix and n_near and fresh.any():
             g = self._tensor(self.buffer.returns[batch.indices])[:, None, :]
@@ -174,7 +179,7 @@ class NearSameReturns(MoPE):
     def _envelope_target(self, batch, w, acting):
         y = super()._envelope_target(batch, w, acting)  # row 0 already mixed (return_mix)
         c = self.config
-        n_near = c.n_omega - 1 - min(c.n_omega - 1, round(c.n_omega * c.relabel_broad))
+        n_near = similar_rows(c)
         fresh = self.global_step - self.buffer.return_steps[batch.indices] < c.return_window
         if not (c.return_mix and n_near and fresh.any()):
             return y

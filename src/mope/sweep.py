@@ -209,13 +209,14 @@ def load_spec(path: str | Path) -> SweepSpec:
         raise SweepError(f"sweep spec '{p}': {exc}") from None
 
 
-def parse_seeds(text: str | int) -> int | list[int]:
-    """``--seeds``: a count ``N`` (seeds ``0..N-1``), a range ``A-B`` (``A..B``, both included) or a list ``a,b,c``.
+def parse_seeds(text: str | int | list[int]) -> int | list[int]:
+    """``--seeds``: a count ``N`` (seeds ``0..N-1``), a range ``A-B`` (``A..B``, both included) or a list ``a,b,c``
+    (a count or a list passes through).
 
     Raises:
         SweepError: naming the text, if it is none of these (the range or list is checked by the spec's rules).
     """
-    if isinstance(text, int):
+    if isinstance(text, (int, list)):
         return text
     raw = str(text).strip()
     try:
@@ -254,7 +255,7 @@ def apply_overrides(spec: SweepSpec, overrides: dict[str, Any] | None = None,
         grid.pop(key, None)
         base[key] = value
     if seeds is not None:
-        new_seeds = _seed_list(seeds if isinstance(seeds, list) else parse_seeds(seeds), "--seeds")
+        new_seeds = _seed_list(parse_seeds(seeds), "--seeds")
     return SweepSpec(spec.name, base, grid, new_seeds, dict(spec.arms))
 
 

@@ -7,7 +7,7 @@ import json
 import pytest
 
 from mope.errors import ConfigError
-from mope.reproduce import reproduce_dst
+from mope.reproduce import dst_jobs, reproduce_dst
 
 TINY = {"eval_prefs": 200, "n_omega": 8, "learning_starts": 50, "hidden_sizes": [32, 32], "batch_size": 16}
 
@@ -40,3 +40,15 @@ def test_reproduce_rejects_bad_arguments(tmp_path):
         reproduce_dst(tmp_path, algos=("dqn",))
     with pytest.raises(ConfigError, match="seeds=0"):
         reproduce_dst(tmp_path, seeds=0)
+    with pytest.raises(ConfigError, match="'5-' is not a count"):
+        reproduce_dst(tmp_path, seeds="5-")
+
+
+@pytest.mark.parametrize(("seeds", "names"), [(2, ["eql-s0", "mope-s0", "eql-s1", "mope-s1"]),
+                                              ("5-6", ["eql-s5", "mope-s5", "eql-s6", "mope-s6"]),
+                                              ("7,3", ["eql-s7", "mope-s7", "eql-s3", "mope-s3"]),
+                                              ([4], ["eql-s4", "mope-s4"])])
+def test_reproduce_seeds_take_a_count_a_range_or_a_list(seeds, names):
+    jobs = dst_jobs(seeds, 300, 150, ("eql", "mope"))
+    assert [j.name for j in jobs] == names
+    assert [j.payload["seed"] for j in jobs] == [int(n.rsplit("-s", 1)[1]) for n in names]

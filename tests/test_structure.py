@@ -254,7 +254,9 @@ def _rows(folder: Path) -> list[dict[str, str]]:
     (["--methods", "mopee"], "unknown method 'mopee' (did you mean 'mope'?)"),
     (["--envs", "mope/RobotConfrontation-v0"], "continuous action space"),
     (["--steps", "0"], "--steps 0 is out of range"),
-    (["--seeds", "0"], "--seeds 0 is out of range"),
+    (["--seeds", "0"], "--seeds=0 is out of range"),
+    (["--seeds", "5-"], "--seeds='5-' is not a count (5), a range (5-9) or a list of seeds (0,5,7)"),
+    (["--seeds", "1,1"], "lists a seed twice"),
 ])
 def test_benchmark_bad_input_is_one_line(tmp_path: Path, args: list[str], needle: str) -> None:
     res = cli("benchmark", "--out", str(tmp_path / "b"), "--methods", "mope", *args)

@@ -19,6 +19,7 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -75,9 +76,12 @@ METHODS: dict[str, dict[str, Any]] = {"mope": {"algo": "mope"}, "eql": {"algo": 
 DEFAULT_METHODS = ("mope", "eql", "mope-paper", "envelope")
 
 
-def check_choices(envs: list[str], methods: list[str], seeds: int, steps: int | None) -> None:
-    """One-line errors for an unknown environment or method, a continuous-action environment, or a budget <= 0."""
+def check_choices(envs: list[str], methods: list[str], seeds: int | str | Sequence[int], steps: int | None
+                  ) -> list[int]:
+    """One-line errors for an unknown environment or method, a continuous-action environment, bad seeds or a
+    budget <= 0; returns the seeds (:func:`mope.sweep.seed_list`)."""
     from mope.envs import make_env
+    from mope.sweep import SweepError, seed_list
 
     for env_id in envs:
         if env_id not in BENCH_ENVS:
@@ -87,22 +91,26 @@ def check_choices(envs: list[str], methods: list[str], seeds: int, steps: int | 
     for m in methods:
         if m not in METHODS:
             raise ConfigError(f"unknown method '{m}'{suggest(m, METHODS)}; choose from {', '.join(METHODS)}")
-    if seeds < 1:
-        raise ConfigError(f"--seeds {seeds} is out of range: must be >= 1")
+    try:
+        seed_values = seed_list(list(seeds) if isinstance(seeds, (list, tuple)) else seeds)
+    except SweepError as exc:
+        raise ConfigError(str(exc)) from None
     if steps is not None and steps < 1:
         raise ConfigError(f"--steps {steps} is out of range: must be >= 1 (the budget)")
     if "envelope" in methods:
         from mope.peers import require_morl_baselines
 
         require_morl_baselines()
+    return seed_values
 
 
-def benchmark_jobs(envs: list[str], methods: list[str], seeds: int, quick: bool, steps: int | None) -> list[Job]:
+def benchmark_jobs(envs: list[str], methods: list[str], seeds: Sequence[int], quick: bool, steps: int | None
+                   ) -> list[Job]:
     """One job per (seed, environment, method), seed-major (a stopped benchmark has whole seeds to report)."""
     from mope.peers import ENVELOPE_EXAMPLE
 
     jobs = []
-    for seed in range(seeds):
+    for seed in seeds:
         for env_id in envs:
             b = BENCH_ENVS[env_id]
             total = steps or (b.quick_steps if quick else b.steps)
@@ -260,7 +268,8 @@ def plot_curves(out: Path, jobs: list[Job], dest: Path) -> list[Path]:
 
 
 def run_benchmark(out: str | Path, envs: list[str] | None = None, methods: list[str] | None = None,
-                  seeds: int = 5, quick: bool = False, steps: int | None = None, workers: int | None = None,
+                  seeds: int | str | Sequence[int] = 5, quick: bool = False, steps: int | None = None,
+                  workers: int | None = None,
                   backend: str = "local", address: str | None = None, report_dir: str | Path | None = None,
                   progress: bool = True, command: str = "") -> dict[str, Any]:
     """Train and evaluate the grid, then write ``benchmark.md``, ``benchmark.json`` and one PNG per environment.
@@ -269,7 +278,8 @@ def run_benchmark(out: str | Path, envs: list[str] | None = None, methods: list[
         out: The folder of the runs (one sub-folder per job); the report goes there too unless ``report_dir``.
         envs: Environments (default: every one of :data:`BENCH_ENVS`).
         methods: Methods (default: mope, eql, mope-paper, and envelope when morl-baselines is installed).
-        seeds: Seeds per (environment, method); ``quick`` forces 1.
+        seeds: Seeds per (environment, method): a count ``N`` (``0..N-1``), a range ``"5-9"`` or a list
+            (:func:`mope.sweep.seed_list`); ``quick`` forces seed 0 alone.
         quick: Small budgets (each environment's ``quick_steps``), one seed, at most 100 preferences and 200-step
             episodes per evaluation, two evaluations per run: a first look, and CI's test.
         steps: Override every environment's budget.
@@ -288,8 +298,7 @@ def run_benchmark(out: str | Path, envs: list[str] | None = None, methods: list[
             methods.append("envelope")
         except ImportError:
             pass
-    seeds = 1 if quick else seeds
-    check_choices(envs, list(methods), seeds, steps)
+    seeds = check_choices(envs, list(methods), 1 if quick else seeds, steps)
     jobs = benchmark_jobs(envs, list(methods), seeds, quick, steps)
     out = Path(out)
     dest = Path(report_dir) if report_dir is not None else out

@@ -248,7 +248,8 @@ app.add_typer(reproduce_app, name="reproduce")
 @reproduce_app.command("dst")
 def reproduce_dst_cmd(
     out: Annotated[Path, typer.Option(help="Output folder (runs, figures, table).")] = Path("runs/reproduce-dst"),
-    seeds: Annotated[int, typer.Option(help="Seeds per variant (the paper-scale run: 10).")] = 3,
+    seeds: Annotated[str, typer.Option(help="Seeds per variant: N (0..N-1; the paper-scale run: 10), a range 5-9 "
+                                            "or a list 0,5,7.")] = "3",
     steps: Annotated[int, typer.Option(help="Environment steps per run.")] = 20_000,
     eval_every: Annotated[int, typer.Option(help="Evaluate CR every N steps.")] = 1000,
     algos: Annotated[str, typer.Option(help="Comma-separated variants.")] = "eql,ee,pe,mope",
@@ -350,7 +351,8 @@ def benchmark(
     methods: Annotated[str | None, typer.Option(
         help="Comma-separated: mope, eql, mope-paper, eql-paper, envelope "
              "\\[default: mope,eql,mope-paper, and envelope when morl-baselines is installed]")] = None,
-    seeds: Annotated[int, typer.Option(help="Seeds per environment and method.")] = 5,
+    seeds: Annotated[str, typer.Option(help="Seeds per environment and method: N (0..N-1), a range 5-9 or a list "
+                                            "0,5,7.")] = "5",
     quick: Annotated[bool, typer.Option(help="One seed, small budgets: a first look (CI runs it).")] = False,
     steps: Annotated[int | None, typer.Option(help="Budget of every environment [default: each one's own]")] = None,
     workers: Annotated[int | None, typer.Option(help="Jobs at once [default: all cores]")] = None,

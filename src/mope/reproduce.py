@@ -7,7 +7,7 @@ then writes into the output folder:
 
 * ``fig2a_cr.png`` -- CR against steps, mean and 95% confidence band per variant;
 * ``fig2a_optimal_share.png`` and ``fig2a_timeouts.png`` -- the same for the two metrics that keep CR honest;
-* ``fig2b_front.png`` -- the true discounted CCS and the solutions each variant recovered (seed 0);
+* ``fig2b_front.png`` -- the true discounted CCS and the solutions each variant recovered (the first seed);
 * ``fig3a_preferences.png`` -- weight on treasure against the solution found, beside the optimal one;
 * ``fig3b_discriminator.png`` -- the discriminator's predicted preference over the grid (EE and MoPE);
 * ``table.md`` and ``results.json`` -- final CR (mean +- std), steps until CR first reaches 1.0, HV, EUM and
@@ -81,17 +81,24 @@ def analyse_run(run_dir: Path, n_prefs: int) -> dict[str, Any]:
             "disc_map": discriminator_map(agent), "sea_map": np.asarray(agent.env.unwrapped.sea_map)}
 
 
-def dst_jobs(seeds: int, steps: int, eval_every: int, algos: Sequence[str], env_id: str = DST,
+def dst_jobs(seeds: int | str | Sequence[int], steps: int, eval_every: int, algos: Sequence[str], env_id: str = DST,
              **overrides: Any) -> list[Job]:
     """Validate the arguments and build one training job per (seed, variant), seed-major.
 
-    Seed-major: every variant's seed 0 comes before any seed 1, so a stopped reproduction can be analysed with
-    fewer seeds (re-run with a smaller ``--seeds``; finished runs are reused).
+    ``seeds`` is a count ``N`` (seeds ``0..N-1``), a range ``"5-9"`` or a list (:func:`mope.sweep.seed_list`).
+    Seed-major: every variant's first seed comes before any second one, so a stopped reproduction can be analysed
+    with fewer seeds (re-run with a smaller ``--seeds``; finished runs are reused).
     """
+    from mope.sweep import SweepError, seed_list
+
     for a in algos:
         check_algo(a)
-    if seeds < 1 or steps < 1:
-        raise ConfigError(f"seeds={seeds} and steps={steps} must both be >= 1")
+    try:
+        seeds = seed_list(list(seeds) if isinstance(seeds, (list, tuple)) else seeds)
+    except SweepError as exc:
+        raise ConfigError(str(exc)) from None
+    if steps < 1:
+        raise ConfigError(f"steps={steps} is out of range: must be >= 1")
     from mope.envs import make_env
 
     if not hasattr(make_env(env_id).unwrapped, "sea_map"):
@@ -99,7 +106,7 @@ def dst_jobs(seeds: int, steps: int, eval_every: int, algos: Sequence[str], env_
                           "deep-sea-treasure-v0, its -concave/-mirrored maps or mope/deep-sea-treasure-seabed-v0")
     return [Job(run_name(a, s), "train", Config.for_algo(a, env_id=env_id, seed=s, total_steps=steps,
                                                          eval_every=eval_every, **overrides).to_dict())
-            for s in range(seeds) for a in algos]
+            for s in seeds for a in algos]
 
 
 def _median_never_infinite(first_steps: np.ndarray) -> float | None:
@@ -114,28 +121,30 @@ def run_name(algo: str, seed: int) -> str:
     return f"{algo}-s{seed}"
 
 
-def summarise_variant(out: Path, algo: str, seeds: int, n_prefs: int) -> tuple[dict[str, Any], dict[str, Any], dict]:
-    """Final evaluation of every seed of one variant: its results entry, its seed-0 analysis and its curves."""
+def summarise_variant(out: Path, algo: str, seeds: Sequence[int], n_prefs: int
+                      ) -> tuple[dict[str, Any], dict[str, Any], dict]:
+    """Final evaluation of every seed of one variant: its results entry, its first seed's analysis and its
+    curves."""
     from mope.experiments import read_metrics
 
-    metric_rows = [read_metrics(out / run_name(algo, s)) for s in range(seeds)]
+    metric_rows = [read_metrics(out / run_name(algo, s)) for s in seeds]
     n = min(len(r) for r in metric_rows)
     step_axis = np.array([r["step"] for r in metric_rows[0][:n]])
     curves = {key: (step_axis, np.array([[r[key] for r in rows[:n]] for rows in metric_rows]))
               for key in CURVES}
-    runs = [analyse_run(out / run_name(algo, s), n_prefs) for s in range(seeds)]
+    runs = [analyse_run(out / run_name(algo, s), n_prefs) for s in seeds]
     fin = {k: np.array([r["metrics"][k] for r in runs]) for k in FINAL_KEYS}
     t_full = np.array([steps_to_full_coverage(rows) for rows in metric_rows])
     result = {
         **{k: {"mean": float(v.mean()), "std": float(v.std()), "values": v.tolist()} for k, v in fin.items()},
         "steps_to_cr1": {"median": _median_never_infinite(t_full),
-                         "reached": int(np.sum(~np.isnan(t_full))), "seeds": seeds,
+                         "reached": int(np.sum(~np.isnan(t_full))), "seeds": len(seeds),
                          "values": [None if np.isnan(t) else float(t) for t in t_full]},
         "best_cr": [float(max(r["cr"] for r in rows)) for rows in metric_rows],
         "paths_per_solution": _mean_ci([r["paths"]["paths_per_solution"] for r in runs]),
         "mi_state_pref": _mean_ci([r["mi"] for r in runs]),
         "s_per_1k_steps": float(np.mean([json.loads((out / run_name(algo, s) / "summary.json").read_text())
-                                         ["s_per_1k_steps"] for s in range(seeds)])),
+                                         ["s_per_1k_steps"] for s in seeds])),
     }
     return result, runs[0], curves
 
@@ -199,7 +208,7 @@ def dst_table(algos: Sequence[str], results: dict[str, Any]) -> str:
     return markdown_table(header, rows)
 
 
-def reproduce_dst(out: str | Path, seeds: int = 3, steps: int = 20_000, eval_every: int = 1000,
+def reproduce_dst(out: str | Path, seeds: int | str | Sequence[int] = 3, steps: int = 20_000, eval_every: int = 1000,
                   algos: tuple[str, ...] = ("eql", "ee", "pe", "mope"), workers: int = 2, progress: bool = True,
                   backend: str = "local", address: str | None = None, env_id: str = DST,
                   **overrides: Any) -> dict[str, Any]:
@@ -209,6 +218,7 @@ def reproduce_dst(out: str | Path, seeds: int = 3, steps: int = 20_000, eval_eve
     finished runs are reused and interrupted ones continue from their last checkpoint.
     """
     jobs = dst_jobs(seeds, steps, eval_every, algos, env_id, **overrides)
+    seeds = list(dict.fromkeys(j.payload["seed"] for j in jobs))
     out = Path(out)
     with FolderLock(out, what="reproduction folder"):
         t0 = time.perf_counter()

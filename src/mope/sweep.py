@@ -232,6 +232,16 @@ def parse_seeds(text: str | int | list[int]) -> int | list[int]:
     return list(range(lo, hi + 1))
 
 
+def seed_list(seeds: int | str | list[int], where: str = "--seeds") -> list[int]:
+    """The seeds a ``--seeds`` value names: a count ``N`` (``0..N-1``), a range ``"5-9"``, a list ``"0,5,7"`` or
+    ``[0, 5, 7]``; the one parser of ``mope sweep``, ``mope reproduce dst`` and ``mope benchmark``.
+
+    Raises:
+        SweepError: naming the value, for anything else, a count below 1, a negative or repeated seed.
+    """
+    return _seed_list(parse_seeds(seeds), where)
+
+
 def apply_overrides(spec: SweepSpec, overrides: dict[str, Any] | None = None,
                     seeds: int | str | list[int] | None = None) -> SweepSpec:
     """Return a copy of ``spec`` with command-line overrides.
@@ -255,7 +265,7 @@ def apply_overrides(spec: SweepSpec, overrides: dict[str, Any] | None = None,
         grid.pop(key, None)
         base[key] = value
     if seeds is not None:
-        new_seeds = _seed_list(parse_seeds(seeds), "--seeds")
+        new_seeds = seed_list(seeds)
     return SweepSpec(spec.name, base, grid, new_seeds, dict(spec.arms))
 
 
@@ -463,5 +473,5 @@ def sweep_command(spec_path: str | Path, out: str | Path | None = None, backend:
     return results
 
 
-__all__ = ["SweepError", "SweepSpec", "Trial", "TrialResult", "apply_overrides", "expand", "load_spec",
+__all__ = ["SweepError", "SweepSpec", "Trial", "TrialResult", "apply_overrides", "expand", "load_spec", "seed_list",
            "parse_spec", "run_sweep", "sweep_command", "trial_name"]

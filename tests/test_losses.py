@@ -11,11 +11,9 @@ import torch
 from mope.losses import (
     clip_targets,
     component_loss,
-    cycle_value,
     envelope_set,
     envelope_target,
     eql_loss,
-    greedy_cycle_start,
     greedy_tail_returns,
     mix_behaviour_returns,
     mutual_information_bonus,
@@ -287,39 +285,6 @@ def test_greedy_tail_returns_hand_values() -> None:
     trunc = greedy_tail_returns(r, v, np.array([True, True, True]), terminated=False, gamma=0.5)
     np.testing.assert_allclose(trunc[-1], [20.0, -1.0])
     np.testing.assert_allclose(trunc[0], [0.0 + 0.5 * (0.0 + 0.5 * 20.0), -1.0 + 0.5 * (-1.0 + 0.5 * -1.0)])
-
-
-def test_greedy_cycle_start_finds_the_loop_the_time_limit_cut() -> None:
-    # s0 -> s1 -> s2 -> s1 -> s2 -> (s1): a 2-step loop; the last visit of s1 before the cut is step 3
-    obs = np.array([[0, 0], [0, 1], [1, 1], [0, 1], [1, 1]])
-    assert greedy_cycle_start(obs, np.array([0, 1]), np.ones(5, bool)) == 3
-    # a random action inside the loop: not the greedy policy's loop
-    assert greedy_cycle_start(obs, np.array([0, 1]), np.array([1, 1, 1, 1, 0], bool)) is None
-    # a random action before it: the loop after it still counts
-    assert greedy_cycle_start(obs, np.array([0, 1]), np.array([0, 1, 1, 1, 1], bool)) == 3
-    # s_T never seen before: no loop
-    assert greedy_cycle_start(obs, np.array([5, 5]), np.ones(5, bool)) is None
-
-
-def test_cycle_value_is_the_loop_run_for_ever() -> None:
-    # rewards (0, -1) then (2, -1), gamma 0.5: (0 + 0.5 * 2) / (1 - 0.25), -(1 + 0.5) / 0.75
-    np.testing.assert_allclose(cycle_value(np.array([[0.0, -1.0], [2.0, -1.0]]), 0.5), [4.0 / 3.0, -2.0])
-    # a bump in place for ever: r / (1 - gamma)
-    np.testing.assert_allclose(cycle_value(np.array([[0.0, -1.0]]), 0.99), [0.0, -100.0], rtol=1e-5)
-
-
-def test_greedy_tail_returns_end_a_cut_loop_on_its_own_return() -> None:
-    """A truncated episode whose last state the greedy policy left two steps before: the tail after the cut is
-    the loop's return, not the (over-estimated) V(s_T), so no step of the loop keeps the network's value."""
-    r = np.array([[0.0, -1.0], [0.0, -1.0], [0.0, -1.0]], dtype=np.float32)
-    v = np.full((3, 2), 50.0, dtype=np.float32)  # an over-estimated value everywhere
-    out = greedy_tail_returns(r, v, np.ones(3, bool), terminated=False, gamma=0.5, cycle_start=1)
-    loop = cycle_value(r[1:], 0.5)  # (0, -2)
-    np.testing.assert_allclose(loop, [0.0, -2.0])
-    np.testing.assert_allclose(out[2], r[2] + 0.5 * loop)
-    np.testing.assert_allclose(out[1], loop)  # s1's return is the loop's value: the fixed point
-    # without the cycle the tail bootstraps from V(s_T) = 50
-    np.testing.assert_allclose(greedy_tail_returns(r, v, np.ones(3, bool), False, 0.5)[2], [25.0, 24.0])
 
 
 def test_mix_behaviour_returns_blends_only_the_own_row_of_fresh_transitions() -> None:

@@ -138,11 +138,9 @@ class BaseAgent(AgentState):
         q = self.target_net(self._tensor(self.buffer.next_obs[slots]), w)  # (T, A, m)
         best = torch.einsum("tm,tam->ta", w, q).argmax(dim=1)
         values = q[torch.arange(len(slots), device=q.device), best].cpu().numpy()
-        greedy = np.asarray(self._episode_greedy, dtype=bool)
-        cycle = None if terminated or not self.config.return_cycles else losses.greedy_cycle_start(
-            self.buffer.obs[slots], self.buffer.next_obs[slots[-1]], greedy)
         returns = losses.greedy_tail_returns(self.buffer.rewards[slots] * self.config.reward_scale, values,
-                                             greedy, terminated, self.config.gamma, cycle_start=cycle)
+                                             np.asarray(self._episode_greedy, dtype=bool), terminated,
+                                             self.config.gamma)
         self.buffer.set_returns(slots, returns, self.global_step)
 
     def _start_episode(self) -> None:

@@ -59,8 +59,7 @@ PRESETS: dict[str, dict[str, Any]] = {
 #: Fields added after mope 0.2.0, with the values that reproduce the runs saved before them: a saved config (it has
 #: every other field) that lacks them is read with these values, not with today's defaults.
 LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0, "reward_scale": 1.0,
-                                "return_mix": 0.0, "return_window": 2_000, "n_step": 1,
-                                "return_cycles": False}
+                                "return_mix": 0.0, "return_window": 2_000, "n_step": 1}
 
 
 def check_preset(name: str) -> str:
@@ -206,10 +205,6 @@ class Config:
     #: mope.losses.greedy_tail_returns; docs/results/return-mix); returns older than return_window are not used.
     return_mix: float = 0.5
     return_window: int = 2_000
-    #: With return_mix: an episode cut by the time limit in a state its greedy policy already left greedily
-    #: (a greedy loop) ends on the loop's own return, not on the network's value of that state
-    #: (mope.losses.greedy_cycle_start).
-    return_cycles: bool = False
     #: Stored steps of reward in every target row, each row cut at its own first non-greedy action
     #: (mope.losses.watkins_n_step_targets; docs/results/n-step). 1: the one-step target of eq. 4.
     n_step: int = 1

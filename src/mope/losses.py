@@ -102,36 +102,8 @@ def watkins_n_step_targets(rewards: torch.Tensor, values: torch.Tensor, cont: to
     return g
 
 
-def greedy_cycle_start(obs: np.ndarray, last_next_obs: np.ndarray, greedy: np.ndarray) -> int | None:
-    """Where the greedy cycle that a time limit cut starts: the latest step ``j`` with ``s_j == s_T`` (the state
-    the episode was truncated in) and every action from ``j`` on greedy; None if there is none.
-
-    Args:
-        obs: ``(T, ...)`` the episode's observations ``s_0 .. s_{T-1}``.
-        last_next_obs: ``s_T``.
-        greedy: ``(T,)`` whether each action was the greedy one.
-    """
-    n = len(obs)
-    same = np.all(np.asarray(obs).reshape(n, -1) == np.asarray(last_next_obs).reshape(1, -1), axis=1)
-    non_greedy = np.flatnonzero(~np.asarray(greedy, dtype=bool))
-    first_allowed = int(non_greedy[-1]) + 1 if len(non_greedy) else 0
-    hits = np.flatnonzero(same[first_allowed:])
-    return first_allowed + int(hits[-1]) if len(hits) else None
-
-
-def cycle_value(rewards: np.ndarray, gamma: float) -> np.ndarray:
-    """Return of running a cycle of ``L`` steps for ever: ``sum_{k<L} gamma^k r_k / (1 - gamma^L)``, ``(m,)``.
-
-    A greedy policy that came back to a state it left greedily (deterministic dynamics) repeats the cycle; this is
-    its value, from what the episode observed, instead of the network's estimate of the state it looped in.
-    """
-    r = np.asarray(rewards, dtype=np.float64)
-    disc = gamma ** np.arange(len(r))
-    return ((disc[:, None] * r).sum(axis=0) / (1.0 - gamma ** len(r))).astype(np.float32)
-
-
 def greedy_tail_returns(rewards: np.ndarray, next_values: np.ndarray, greedy: np.ndarray, terminated: bool,
-                        gamma: float, cycle_start: int | None = None) -> np.ndarray:
+                        gamma: float) -> np.ndarray:
     """Return of one finished episode from each step, along its greedy actions (Watkins' trace cut).
 
     ``G_t = r_t + gamma * U_{t+1}``, where the value ``U_{t+1}`` of ``s_{t+1}`` is ``G_{t+1}`` if the action taken
@@ -146,22 +118,13 @@ def greedy_tail_returns(rewards: np.ndarray, next_values: np.ndarray, greedy: np
         greedy: ``(T,)`` whether each action was the greedy one.
         terminated: Whether the last step ended the episode (not the time limit).
         gamma: Discount factor.
-        cycle_start: With a time limit and ``s_T`` equal to a state ``s_j`` the episode left greedily
-            (:func:`greedy_cycle_start`), ``j``: the value after the last step is then the cycle's own return
-            (:func:`cycle_value`), not ``V(s_T)``, so a greedy loop's target is not its own, possibly
-            over-estimated, value.
 
     Returns:
         ``(T, m)`` returns.
     """
     n = len(rewards)
     out = np.empty_like(np.asarray(rewards, dtype=np.float32))
-    if terminated:
-        after = np.zeros(out.shape[1], dtype=np.float32)
-    elif cycle_start is not None:
-        after = cycle_value(np.asarray(rewards)[cycle_start:], gamma)
-    else:
-        after = np.asarray(next_values[-1], np.float32)
+    after = np.zeros(out.shape[1], dtype=np.float32) if terminated else np.asarray(next_values[-1], np.float32)
     for t in range(n - 1, -1, -1):
         out[t] = rewards[t] + gamma * after
         after = out[t] if greedy[t] or t == 0 else np.asarray(next_values[t - 1], np.float32)

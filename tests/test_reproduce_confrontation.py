@@ -135,6 +135,18 @@ def test_reproduce_rejects_bad_arguments(tmp_path) -> None:
         reproduce_confrontation(tmp_path, episodes=0)
     with pytest.raises(ConfigError, match="per PPO policy"):
         reproduce_confrontation(tmp_path, steps=100, ppo_budget="shared")
+    with pytest.raises(ConfigError, match="'3-1': the range ends before it starts"):
+        reproduce_confrontation(tmp_path, seeds="3-1")
+
+
+def test_confrontation_seeds_take_a_count_a_range_or_a_list() -> None:
+    from mope.reproduce_confrontation import check_confrontation_args, confrontation_jobs
+
+    for given, want in ((2, [0, 1]), ("4-5", [4, 5]), ("7,2", [7, 2])):
+        seeds, ppo_steps = check_confrontation_args(given, 1000, 2, 3, 2, 1, "each")
+        assert seeds == want and ppo_steps == 1000
+    names = [j.name for j in confrontation_jobs([5], 1000, 2, 1000, 3, "cpu", {})]
+    assert names == ["eql-s5", "mope-s5", "ppo-s5-pref00", "ppo-s5-pref01"]
 
 
 @pytest.mark.slow

@@ -284,7 +284,7 @@ def reproduce_dst_cmd(
 def reproduce_confrontation_cmd(
     out: Annotated[Path, typer.Option(help="Output folder (runs, figures, table).")] = Path(
         "runs/reproduce-confrontation"),
-    seeds: Annotated[int, typer.Option(help="Seeds per method.")] = 1,
+    seeds: Annotated[str, typer.Option(help="Seeds per method: N (0..N-1), a range 5-9 or a list 0,5,7.")] = "1",
     steps: Annotated[int, typer.Option(help="Environment steps per agent (and per PPO policy, see --ppo-budget).")
                      ] = 15_000,
     ppo_prefs: Annotated[int, typer.Option(help="K preferences, one PPO policy each.")] = 11,

@@ -31,6 +31,7 @@ from __future__ import annotations
 import json
 import time
 from collections import Counter
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -203,8 +204,8 @@ def plot_fig6(games: Any, prefs: np.ndarray, half: float, path: Path) -> Path:
 # ------------------------------------------------------------------------------------------------------------
 # the experiment
 # ------------------------------------------------------------------------------------------------------------
-def confrontation_jobs(seeds: int, steps: int, ppo_prefs: int, ppo_steps: int, eval_prefs: int, device: str,
-                       overrides: dict[str, Any]) -> list[Job]:
+def confrontation_jobs(seeds: Sequence[int], steps: int, ppo_prefs: int, ppo_steps: int, eval_prefs: int,
+                       device: str, overrides: dict[str, Any]) -> list[Job]:
     """EQL and MoPE runs (one per seed) and PPO policies (K per seed), seed-major."""
     from mope.preferences import equally_spaced
 
@@ -212,7 +213,7 @@ def confrontation_jobs(seeds: int, steps: int, ppo_prefs: int, ppo_steps: int, e
             "checkpoint_every": 0, **overrides}
     ppo_w = equally_spaced(2, ppo_prefs)
     jobs = []
-    for s in range(seeds):
+    for s in seeds:
         jobs += [Job(f"{a}-s{s}", "train", Config.for_algo(a, seed=s, **base).to_dict()) for a in ("eql", "mope")]
         jobs += [Job(ppo_name(s, k), "ppo", {"pref": ppo_w[k].tolist(), "steps": ppo_steps, "seed": 1000 * s + k,
                                              "env_id": conf.CONTINUOUS_ID, "device": device})
@@ -225,10 +226,17 @@ def ppo_name(seed: int, k: int) -> str:
     return f"ppo-s{seed}-pref{k:02d}"
 
 
-def check_confrontation_args(seeds: int, steps: int, ppo_prefs: int, eval_prefs: int, episodes: int, workers: int,
-                             ppo_budget: str) -> int:
-    """Validate the arguments; return the steps each PPO policy gets."""
-    for name, val in (("seeds", seeds), ("steps", steps), ("ppo_prefs", ppo_prefs), ("eval_prefs", eval_prefs),
+def check_confrontation_args(seeds: int | str | Sequence[int], steps: int, ppo_prefs: int, eval_prefs: int,
+                             episodes: int, workers: int, ppo_budget: str) -> tuple[list[int], int]:
+    """Validate the arguments; return the seeds (:func:`mope.sweep.seed_list`) and the steps each PPO policy
+    gets."""
+    from mope.sweep import SweepError, seed_list
+
+    try:
+        seed_values = seed_list(list(seeds) if isinstance(seeds, (list, tuple)) else seeds)
+    except SweepError as exc:
+        raise ConfigError(str(exc)) from None
+    for name, val in (("steps", steps), ("ppo_prefs", ppo_prefs), ("eval_prefs", eval_prefs),
                       ("episodes", episodes), ("workers", workers)):
         if not isinstance(val, int) or val < 1:
             raise ConfigError(f"{name}={val!r} is out of range: must be an integer >= 1")
@@ -237,12 +245,12 @@ def check_confrontation_args(seeds: int, steps: int, ppo_prefs: int, eval_prefs:
     ppo_steps = steps if ppo_budget == "each" else steps // ppo_prefs
     if ppo_steps < 64:
         raise ConfigError(f"steps={steps} leaves {ppo_steps} steps per PPO policy; need at least 64")
-    return ppo_steps
+    return seed_values, ppo_steps
 
 
-def evaluate_confrontation(out: Path, seeds: int, ppo_prefs: int, eval_prefs: int, episodes: int,
+def evaluate_confrontation(out: Path, seeds: Sequence[int], ppo_prefs: int, eval_prefs: int, episodes: int,
                            max_steps: int | None) -> tuple[dict[str, list[dict[str, Any]]], Any]:
-    """Every method's summary per seed, and MoPE's recorded Fig. 6 games (seed 0)."""
+    """Every method's summary per seed, and MoPE's recorded Fig. 6 games (the first seed)."""
     from mope.baselines import Episodes
     from mope.envs.confrontation_batch import play_reference
     from mope.preferences import equally_spaced
@@ -253,11 +261,12 @@ def evaluate_confrontation(out: Path, seeds: int, ppo_prefs: int, eval_prefs: in
     fig6_w = np.asarray(FIG6_PREFS)
     per_seed: dict[str, list[dict[str, Any]]] = {m: [] for m in METHODS}
     games = None
-    for s in range(seeds):
+    for s in seeds:
         w, eps = evaluate_ppo([out / ppo_name(s, k) for k in range(ppo_prefs)], episodes)
         per_seed["ppo"].append(summarize(w, eps, episodes, ref, probe.dt, probe.v_max))
         for a in ("eql", "mope"):
-            eps, g = evaluate_agent(out / f"{a}-s{s}", eval_w, episodes, fig6_w if (a == "mope" and s == 0) else None)
+            record = fig6_w if (a == "mope" and s == seeds[0]) else None
+            eps, g = evaluate_agent(out / f"{a}-s{s}", eval_w, episodes, record)
             games = g if g is not None else games
             per_seed[a].append(summarize(eval_w, eps, episodes, ref, probe.dt, probe.v_max))
     for name in REFERENCES:
@@ -268,8 +277,10 @@ def evaluate_confrontation(out: Path, seeds: int, ppo_prefs: int, eval_prefs: in
     return per_seed, games
 
 
-def confrontation_results(out: Path, per_seed: dict[str, list[dict[str, Any]]], seeds: int) -> dict[str, Any]:
-    """Mean and std over seeds of every table metric, plus seed 0's solutions and the agents' training time."""
+def confrontation_results(out: Path, per_seed: dict[str, list[dict[str, Any]]], seeds: Sequence[int]
+                          ) -> dict[str, Any]:
+    """Mean and std over seeds of every table metric, plus the first seed's solutions and the agents' training
+    time."""
     keys = ("hv", "win", "loss", "out", "blue_out", "timeout", "strategies", "entropy_bits", "r_catch", "r_move")
     results: dict[str, Any] = {}
     for m in (*METHODS, *REFERENCES):
@@ -279,7 +290,7 @@ def confrontation_results(out: Path, per_seed: dict[str, list[dict[str, Any]]], 
         results[m]["points_seed0"] = per_seed[m][0]["points"].round(4).tolist()
         results[m]["prefs_seed0"] = per_seed[m][0]["prefs"].round(4).tolist()
     for a in ("eql", "mope"):
-        walls = [json.loads((out / f"{a}-s{s}" / "summary.json").read_text()) for s in range(seeds)]
+        walls = [json.loads((out / f"{a}-s{s}" / "summary.json").read_text()) for s in seeds]
         results[a]["train_wall_s"] = float(np.mean([w.get("wall_s", np.nan) for w in walls]))
     return results
 
@@ -314,15 +325,16 @@ def confrontation_table(results: dict[str, Any], seeds: int, steps: int, ppo_ste
     return markdown_table(header, rows)
 
 
-def reproduce_confrontation(out: str | Path, seeds: int = 1, steps: int = 15_000, ppo_prefs: int = 11,
-                            eval_prefs: int = 100, episodes: int = 5, workers: int = 2, progress: bool = True,
-                            ppo_budget: str = "each", device: str = "cpu", backend: str = "local",
-                            address: str | None = None, **overrides: Any) -> dict[str, Any]:
+def reproduce_confrontation(out: str | Path, seeds: int | str | Sequence[int] = 1, steps: int = 15_000,
+                            ppo_prefs: int = 11, eval_prefs: int = 100, episodes: int = 5, workers: int = 2,
+                            progress: bool = True, ppo_budget: str = "each", device: str = "cpu",
+                            backend: str = "local", address: str | None = None, **overrides: Any) -> dict[str, Any]:
     """Train PPO x K, EQL and MoPE, evaluate them and write Fig. 5, Fig. 6 and the table.
 
     Args:
         out: Output folder (run folders ``eql-s<seed>``, ``mope-s<seed>``, ``ppo-s<seed>-pref<k>`` inside).
-        seeds: Seeds per method.
+        seeds: Seeds per method: a count ``N`` (``0..N-1``), a range ``"5-9"`` or a list
+            (:func:`mope.sweep.seed_list`); the figures show the first.
         steps: Environment steps per EQL/MoPE agent, and per PPO policy (``ppo_budget="each"``) or for all K
             together (``"shared"``).
         ppo_prefs: K, PPO's equally spaced preferences.
@@ -339,7 +351,7 @@ def reproduce_confrontation(out: str | Path, seeds: int = 1, steps: int = 15_000
     Returns:
         ``{"results", "table", "out", "train_wall_s", "eval_wall_s"}``.
     """
-    ppo_steps = check_confrontation_args(seeds, steps, ppo_prefs, eval_prefs, episodes, workers, ppo_budget)
+    seeds, ppo_steps = check_confrontation_args(seeds, steps, ppo_prefs, eval_prefs, episodes, workers, ppo_budget)
     jobs = confrontation_jobs(seeds, steps, ppo_prefs, ppo_steps, eval_prefs, device, overrides)
     out = Path(out)
     with FolderLock(out, what="reproduction folder"):
@@ -360,7 +372,7 @@ def reproduce_confrontation(out: str | Path, seeds: int = 1, steps: int = 15_000
         results = confrontation_results(out, per_seed, seeds)
         results["reference_front_hv"] = reference_front_hv(
             per_seed, conf.reference_point(1.0, max(overrides.get("max_episode_steps") or 0, conf.DEFAULT_HORIZON)))
-        table = confrontation_table(results, seeds, steps, ppo_steps, ppo_prefs, eval_prefs)
+        table = confrontation_table(results, len(seeds), steps, ppo_steps, ppo_prefs, eval_prefs)
         table += f"\n\nHV of the four reference policies' front: {results['reference_front_hv']:.1f}"
         (out / "table.md").write_text(table + "\n")
         ref = conf.reference_point(1.0, max(overrides.get("max_episode_steps") or 0, conf.DEFAULT_HORIZON))

@@ -81,7 +81,7 @@ def check_choices(envs: list[str], methods: list[str], seeds: int | str | Sequen
     """One-line errors for an unknown environment or method, a continuous-action environment, bad seeds or a
     budget <= 0; returns the seeds (:func:`mope.sweep.seed_list`)."""
     from mope.envs import make_env
-    from mope.sweep import SweepError, seed_list
+    from mope.sweep import seed_list
 
     for env_id in envs:
         if env_id not in BENCH_ENVS:
@@ -91,10 +91,7 @@ def check_choices(envs: list[str], methods: list[str], seeds: int | str | Sequen
     for m in methods:
         if m not in METHODS:
             raise ConfigError(f"unknown method '{m}'{suggest(m, METHODS)}; choose from {', '.join(METHODS)}")
-    try:
-        seed_values = seed_list(list(seeds) if isinstance(seeds, (list, tuple)) else seeds)
-    except SweepError as exc:
-        raise ConfigError(str(exc)) from None
+    seed_values = seed_list(seeds)
     if steps is not None and steps < 1:
         raise ConfigError(f"--steps {steps} is out of range: must be >= 1 (the budget)")
     if "envelope" in methods:

@@ -89,14 +89,11 @@ def dst_jobs(seeds: int | str | Sequence[int], steps: int, eval_every: int, algo
     Seed-major: every variant's first seed comes before any second one, so a stopped reproduction can be analysed
     with fewer seeds (re-run with a smaller ``--seeds``; finished runs are reused).
     """
-    from mope.sweep import SweepError, seed_list
+    from mope.sweep import seed_list
 
     for a in algos:
         check_algo(a)
-    try:
-        seeds = seed_list(list(seeds) if isinstance(seeds, (list, tuple)) else seeds)
-    except SweepError as exc:
-        raise ConfigError(str(exc)) from None
+    seeds = seed_list(seeds)
     if steps < 1:
         raise ConfigError(f"steps={steps} is out of range: must be >= 1")
     from mope.envs import make_env

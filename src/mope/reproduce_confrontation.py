@@ -230,12 +230,9 @@ def check_confrontation_args(seeds: int | str | Sequence[int], steps: int, ppo_p
                              episodes: int, workers: int, ppo_budget: str) -> tuple[list[int], int]:
     """Validate the arguments; return the seeds (:func:`mope.sweep.seed_list`) and the steps each PPO policy
     gets."""
-    from mope.sweep import SweepError, seed_list
+    from mope.sweep import seed_list
 
-    try:
-        seed_values = seed_list(list(seeds) if isinstance(seeds, (list, tuple)) else seeds)
-    except SweepError as exc:
-        raise ConfigError(str(exc)) from None
+    seed_values = seed_list(seeds)
     for name, val in (("steps", steps), ("ppo_prefs", ppo_prefs), ("eval_prefs", eval_prefs),
                       ("episodes", episodes), ("workers", workers)):
         if not isinstance(val, int) or val < 1:

@@ -35,15 +35,16 @@ from pathlib import Path
 from typing import Any
 
 from mope.config import Config
-from mope.errors import ConfigError, MopeError, suggest
+from mope.errors import ConfigError, suggest
 from mope.jobs import Job, JobError, check_backend, check_job_folders, run_jobs
 from mope.locks import FolderLock
 
 SPEC_KEYS = ("name", "base", "grid", "arms", "seeds", "seed")
 
 
-class SweepError(MopeError):
-    """A sweep spec is malformed, or a sweep cannot be run as asked."""
+class SweepError(ConfigError):
+    """A sweep spec is malformed, or a sweep cannot be run as asked (a :class:`ConfigError`, so a bad ``--seeds``
+    is one for every command that takes it)."""
 
 
 @dataclass
@@ -232,14 +233,14 @@ def parse_seeds(text: str | int | list[int]) -> int | list[int]:
     return list(range(lo, hi + 1))
 
 
-def seed_list(seeds: int | str | list[int], where: str = "--seeds") -> list[int]:
+def seed_list(seeds: int | str | Sequence[int], where: str = "--seeds") -> list[int]:
     """The seeds a ``--seeds`` value names: a count ``N`` (``0..N-1``), a range ``"5-9"``, a list ``"0,5,7"`` or
-    ``[0, 5, 7]``; the one parser of ``mope sweep``, ``mope reproduce dst`` and ``mope benchmark``.
+    ``[0, 5, 7]``; the one parser of ``mope sweep``, ``mope reproduce`` and ``mope benchmark``.
 
     Raises:
         SweepError: naming the value, for anything else, a count below 1, a negative or repeated seed.
     """
-    return _seed_list(parse_seeds(seeds), where)
+    return _seed_list(parse_seeds(list(seeds) if isinstance(seeds, (list, tuple)) else seeds), where)
 
 
 def apply_overrides(spec: SweepSpec, overrides: dict[str, Any] | None = None,

@@ -214,8 +214,10 @@ def reproduce_dst(out: str | Path, seeds: int | str | Sequence[int] = 3, steps: 
     Runs go through :func:`mope.jobs.run_jobs` (local processes or Ray), so an interrupted reproduction resumes:
     finished runs are reused and interrupted ones continue from their last checkpoint.
     """
+    from mope.sweep import seed_list
+
+    seeds = seed_list(seeds)
     jobs = dst_jobs(seeds, steps, eval_every, algos, env_id, **overrides)
-    seeds = list(dict.fromkeys(j.payload["seed"] for j in jobs))
     out = Path(out)
     with FolderLock(out, what="reproduction folder"):
         t0 = time.perf_counter()

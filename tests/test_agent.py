@@ -8,6 +8,7 @@ import torch
 
 import mope
 from mope import EQL, CheckpointError, Config, MoPE, MopeError, PreferenceError, make_env, targets
+from mope.base import Episode
 
 SMALL = {"hidden_sizes": (32, 32), "n_omega": 8, "batch_size": 16, "learning_starts": 32, "buffer_size": 2000}
 
@@ -277,13 +278,13 @@ def test_return_mix_pulls_a_looping_states_target_to_what_the_loop_returns():
         inflate.weight.zero_()
         inflate.bias.copy_(torch.tensor([30.0, 0.0]).repeat(inflate.bias.numel() // 2))
     pref = np.array([0.9, 0.1])
-    agent._pref, agent._episode_slots, agent._episode_greedy = pref, [], []
+    episode = Episode(0, pref, np.array([0, 0]))
     for _ in range(40):  # a time-limited loop: bump into the left wall at the start (reward (0, -1))
-        agent._episode_slots.append(agent.buffer.pos)
-        agent._episode_greedy.append(True)
+        episode.slots.append(agent.buffer.pos)
+        episode.greedy.append(True)
         agent.buffer.add(np.array([0, 0]), pref, 2, np.array([0.0, -1.0]), np.array([0, 0]), False)
     agent.global_step = 40
-    agent.store_episode_returns(terminated=False)
+    agent.store_episode_returns(episode, terminated=False)
     batch = agent.buffer.sample(8, np.random.default_rng(0))
     batch.indices[:] = 0  # the loop's first step: 40 steps of (0, -1), then the inflated (30, 0) discounted
     w = agent._tensor(agent.relabel(batch.prefs))

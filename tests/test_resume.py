@@ -37,24 +37,31 @@ def _metrics(run: Path) -> list[dict[str, str]]:
     return rows
 
 
-@pytest.mark.parametrize("extra", [{}, {"return_mix": 0.0}], ids=["defaults", "no-return-mix"])
+@pytest.mark.parametrize("extra", [{}, {"return_mix": 0.0}, {"n_envs": 3, "train_freq": 2},
+                                   {"n_envs": 4, "n_step": 3, "gradient_steps": 2}],
+                         ids=["defaults", "no-return-mix", "three-envs", "four-envs-n-step"])
 def test_agent_save_load_mid_episode_continues_identically(tmp_path, extra):
     cfg = Config.for_algo("mope", total_steps=400, learning_starts=50, n_omega=8, hidden_sizes=[32, 32], seed=5,
                           **extra)
+    n = cfg.n_envs
     ref = MoPE("deep-sea-treasure-v0", cfg)
     ref.train(400)
     a = MoPE("deep-sea-treasure-v0", cfg)
-    a.train(237)
-    assert a._episode_actions, "the test must checkpoint inside an episode"
+    a.train(237 if n == 1 else 240)
+    assert sum(bool(ep.actions) for ep in a._episodes) >= min(n, 2), "the test must checkpoint inside episodes"
     a.save(tmp_path / "mid.pt", include_buffer=True)
     b = MoPE.load(tmp_path / "mid.pt")
-    np.testing.assert_array_equal(np.asarray(b._obs), np.asarray(a._obs))
-    b.train(163)
-    assert b.global_step == ref.global_step == 400 and b.episodes == ref.episodes
+    for ep_a, ep_b in zip(a._episodes, b._episodes, strict=True):
+        np.testing.assert_array_equal(np.asarray(ep_b.obs), np.asarray(ep_a.obs))
+        assert (ep_a.seed, ep_a.actions, ep_a.slots, ep_a.greedy) == (ep_b.seed, ep_b.actions, ep_b.slots,
+                                                                      ep_b.greedy)
+    b.train(400 - a.global_step)
+    assert b.global_step == ref.global_step == -(-400 // n) * n and b.episodes == ref.episodes  # whole steps of n
+    assert b.episodes_started == ref.episodes_started
     for p_ref, p_b in zip(ref.q_net.parameters(), b.q_net.parameters(), strict=True):
         assert np.array_equal(p_ref.detach().numpy(), p_b.detach().numpy())
     np.testing.assert_array_equal(ref.pref_sampler.counts, b.pref_sampler.counts)
-    if not extra:  # the greedy-tail returns of the episode that spanned the checkpoint are the same too
+    if extra.get("return_mix") != 0.0:  # the greedy-tail returns of the episodes that spanned the checkpoint too
         np.testing.assert_array_equal(ref.buffer.return_steps, b.buffer.return_steps)
         np.testing.assert_array_equal(ref.buffer.returns, b.buffer.returns)
 

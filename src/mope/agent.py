@@ -26,6 +26,7 @@ The loop that strings these together, with evaluation, progress, checkpoints and
 
 from __future__ import annotations
 
+import copy
 import math
 from typing import Any
 
@@ -36,7 +37,7 @@ from torch import nn
 
 from mope import losses, targets
 from mope.agent_state import resolve_device
-from mope.base import BaseAgent, linear_schedule
+from mope.base import BaseAgent, Episode, linear_schedule
 from mope.config import Config, check_algo
 from mope.envs import check_env_fits, make_env
 from mope.errors import ConfigError, MopeError
@@ -73,6 +74,11 @@ def cosine_schedule(start: float, end: float, duration: int, step: int) -> float
     """Cosine interpolation from ``start`` to ``end`` over ``duration`` steps, then constant."""
     frac = min(1.0, step / max(1, duration))
     return end + 0.5 * (start - end) * (1.0 + math.cos(math.pi * frac))
+
+
+def crossed(step: int, n: int, every: int) -> bool:
+    """Whether the last ``n`` env steps, ending at ``step``, passed a multiple of ``every`` (``every`` > 0)."""
+    return step // every > (step - n) // every
 
 
 def update_statistics(loss: torch.Tensor, parts: dict[str, torch.Tensor], td: torch.Tensor, q: torch.Tensor,
@@ -128,6 +134,8 @@ class MoPE(BaseAgent):
         self.config = cfg = self._resolve_config(env, config, overrides)
         self.env = make_env(cfg.env_id, cfg.max_episode_steps) if isinstance(env, str) else env
         spec = check_env_fits(self.env, cfg.env_id)
+        #: The ``n_envs`` training environments (``env`` is the first), stepped together by :meth:`collect_step`.
+        self.envs = [self.env] + [copy.deepcopy(self.env) for _ in range(cfg.n_envs - 1)]
         self.n_actions, self.m = spec.n_actions, spec.n_objectives
         self.obs_shape = spec.obs_space.shape or ()
 
@@ -163,20 +171,19 @@ class MoPE(BaseAgent):
         self._q_high_t = torch.as_tensor(self.q_high * cfg.reward_scale, dtype=torch.float32, device=self.device)
         obs_dtype = np.float32 if not isinstance(spec.obs_space, gym.spaces.Discrete) else np.int64
         self.buffer = ReplayBuffer(cfg.buffer_size, self.obs_shape, self.m, cfg.per, obs_dtype)
+        self.buffer.stride = cfg.n_envs
         self.global_step = 0
+        #: Episodes finished, and started (the next reset's seed is ``seed + episodes_started``).
         self.episodes = 0
+        self.episodes_started = 0
         #: Training wall seconds before the current ``train`` call (carried across resumes), evaluations included.
         self.wall_s = 0.0
         #: Of which evaluating (carried across resumes too).
         self.eval_seconds = 0.0
-        # The episode in progress (kept across ``train`` calls and in resumable checkpoints): its reset seed,
-        # preference, current observation and the actions taken so far (replayed on load to restore the env).
-        self._obs: Any = None
-        self._pref: np.ndarray | None = None
-        self._episode_actions: list[int] = []
-        # ... and, with return_mix, its buffer slots and which of its actions were greedy.
-        self._episode_slots: list[int] = []
-        self._episode_greedy: list[bool] = []
+        # The episode in progress in each env (kept across ``train`` calls and in resumable checkpoints): its
+        # reset seed, preference, current observation and the actions taken so far (replayed on load to restore
+        # the env), and, with return_mix, its buffer slots and which of its actions were greedy. None: not begun.
+        self._episodes: list[Episode] | None = None
         #: Statistics of the latest update (what :meth:`update` returned).
         self.last_losses: dict[str, float] = {}
         #: Solutions of the latest evaluation in :meth:`train` (uniform preference set), or None.
@@ -203,23 +210,26 @@ class MoPE(BaseAgent):
     # learning
     # ---------------------------------------------------------------------------------------------------------
     def learn_step(self) -> dict[str, float] | None:
-        """Steps 2-5, ``gradient_steps`` times, once learning has started; the last update's statistics."""
+        """Steps 2-5, ``gradient_steps`` times, each followed by the Polyak update of the target network, once
+        learning has started and every ``train_freq``-th collection step; the last update's statistics."""
         c = self.config
-        if self.global_step <= c.learning_starts or len(self.buffer) < c.batch_size:
+        if self.global_step <= c.learning_starts or len(self.buffer) < c.batch_size \
+                or (self.global_step // c.n_envs) % c.train_freq:
             return None
         stats = None
         for _ in range(c.gradient_steps):
             stats = self.update()
+            if c.target_tau is not None:
+                with torch.no_grad():
+                    torch._foreach_lerp_(list(self.target_net.parameters()), list(self.q_net.parameters()),
+                                         c.target_tau)
         return stats
 
     def end_step(self) -> None:
-        """Housekeeping after a step: the target network (a hard copy every ``target_update_freq`` steps, or Polyak
-        averaging with ``target_tau``) and the learning-rate schedule."""
+        """Housekeeping after a collection step: the hard target-network copy (every ``target_update_freq`` env
+        steps, when ``target_tau`` is None) and the learning-rate schedule."""
         c = self.config
-        if c.target_tau is not None:
-            with torch.no_grad():
-                torch._foreach_lerp_(list(self.target_net.parameters()), list(self.q_net.parameters()), c.target_tau)
-        elif self.global_step % c.target_update_freq == 0:
+        if c.target_tau is None and crossed(self.global_step, c.n_envs, c.target_update_freq):
             self.target_net.load_state_dict(self.q_net.state_dict())
         if c.learning_rate_end is not None:
             for group in self.optimizer.param_groups:

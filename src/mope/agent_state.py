@@ -124,6 +124,7 @@ class AgentState:
             "preference_sampler": a.pref_sampler.state_dict(),
             "global_step": a.global_step,
             "episodes": a.episodes,
+            "episodes_started": a.episodes_started,
             "rng": a.rng.bit_generator.state,
             "torch_rng": torch.get_rng_state(),
             "wall_s": a.wall_s,
@@ -135,11 +136,12 @@ class AgentState:
         if include_buffer:
             state["buffer"] = {k: torch.as_tensor(v) if isinstance(v, np.ndarray) else v
                                for k, v in a.buffer.state_dict().items()}
-            if a._pref is not None:
-                state["episode"] = {"pref": torch.as_tensor(a._pref),
-                                    "actions": torch.as_tensor(a._episode_actions, dtype=torch.int64),
-                                    "slots": torch.as_tensor(a._episode_slots, dtype=torch.int64),
-                                    "greedy": torch.as_tensor(a._episode_greedy, dtype=torch.bool)}
+            if a._episodes is not None:
+                state["episodes_in_progress"] = [
+                    {"seed": ep.seed, "pref": torch.as_tensor(ep.pref),
+                     "actions": torch.as_tensor(ep.actions, dtype=torch.int64),
+                     "slots": torch.as_tensor(ep.slots, dtype=torch.int64),
+                     "greedy": torch.as_tensor(ep.greedy, dtype=torch.bool)} for ep in a._episodes]
             state["last_losses"] = dict(a.last_losses)
         return state
 
@@ -196,6 +198,7 @@ class AgentState:
         a.pref_sampler.load_state_dict(data["preference_sampler"])
         a.global_step = int(data["global_step"])
         a.episodes = int(data["episodes"])
+        a.episodes_started = int(data.get("episodes_started", a.episodes))
         a.rng.bit_generator.state = data["rng"]
         torch.set_rng_state(data["torch_rng"])
         a.wall_s = float(data.get("wall_s", 0.0))
@@ -204,22 +207,32 @@ class AgentState:
             a.buffer.load_state_dict({k: v.numpy() if isinstance(v, torch.Tensor) else v
                                       for k, v in data["buffer"].items()})
             a.last_losses = dict(data.get("last_losses", {}))
-        if "episode" in data:
+        if "episodes_in_progress" in data:
+            a._episodes = [a._restore_episode(i, int(ep["seed"]), ep["pref"].numpy(), ep["actions"].tolist(),
+                                              ep["slots"].tolist(), ep["greedy"].tolist())
+                           for i, ep in enumerate(data["episodes_in_progress"])]
+        elif "episode" in data:  # checkpoints of one env, before n_envs: the reset seed was seed + episodes
             ep = data["episode"]
-            a._restore_episode(ep["pref"].numpy(), ep["actions"].tolist())
-            if "slots" in ep:  # checkpoints before return_mix have none
-                a._episode_slots = [int(i) for i in ep["slots"].tolist()]
-                a._episode_greedy = [bool(g) for g in ep["greedy"].tolist()]
+            a._episodes = [a._restore_episode(0, a.config.seed + a.episodes, ep["pref"].numpy(),
+                                              ep["actions"].tolist(), ep.get("slots", torch.zeros(0)).tolist(),
+                                              ep.get("greedy", torch.zeros(0)).tolist())]
+            a.episodes_started = a.episodes + 1
+        if a._episodes is not None and len(a._episodes) != len(a.envs):
+            raise CheckpointError(f"checkpoint holds {len(a._episodes)} episodes in progress but the agent has "
+                                  f"n_envs={len(a.envs)}")
 
-    def _restore_episode(self, pref: np.ndarray, actions: list[int]) -> None:
-        """Rebuild the episode in progress by replaying its actions from its seeded reset (no RNG draws)."""
+    def _restore_episode(self, i: int, seed: int, pref: np.ndarray, actions: list[int], slots: list[int],
+                         greedy: list[bool]) -> Any:
+        """Rebuild the episode in progress in env ``i`` by replaying its actions from its seeded reset (no RNG
+        draws)."""
+        from mope.base import Episode
+
         a: Any = self
-        a._obs, _ = a.env.reset(seed=a.config.seed + a.episodes)
+        obs, _ = a.envs[i].reset(seed=seed)
         for act in actions:
-            a._obs, *_ = a.env.step(int(act))
-        a._pref = np.asarray(pref, dtype=np.float64)
-        a._episode_actions = [int(act) for act in actions]
-        a._episode_slots, a._episode_greedy = [], []
+            obs, *_ = a.envs[i].step(int(act))
+        return Episode(seed, np.asarray(pref, dtype=np.float64), obs, [int(x) for x in actions],
+                       [int(x) for x in slots], [bool(x) for x in greedy])
 
     def __repr__(self) -> str:
         a: Any = self

@@ -8,6 +8,7 @@ learns.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import Any
 
 import gymnasium as gym
@@ -27,10 +28,35 @@ def linear_schedule(start: float, end: float, duration: int, step: int) -> float
     return start + frac * (end - start)
 
 
+@dataclass
+class Episode:
+    """The episode in progress in one training env.
+
+    Attributes:
+        seed: The seed of its reset (resuming replays ``actions`` from it).
+        pref: Its preference omega_b, drawn by the preference sampler at the reset.
+        obs: The env's current observation.
+        actions: The actions taken so far.
+        slots: With ``return_mix``, the buffer slots of its transitions ...
+        greedy: ... and which of its actions were greedy.
+    """
+
+    seed: int
+    pref: np.ndarray
+    obs: Any
+    actions: list[int] = field(default_factory=list)
+    slots: list[int] = field(default_factory=list)
+    greedy: list[bool] = field(default_factory=list)
+
+
 class BaseAgent(AgentState):
     """Acting, collection and the training entry point of a preference-conditioned Q agent."""
 
     q_net: torch.nn.Module
+    envs: list[gym.Env]
+    episodes: int
+    episodes_started: int
+    _episodes: list[Episode] | None
     target_net: torch.nn.Module
     buffer: ReplayBuffer
     n_actions: int
@@ -39,6 +65,8 @@ class BaseAgent(AgentState):
     device: torch.device
     rng: np.random.Generator
     global_step: int
+    #: Which rows of the latest epsilon-greedy :meth:`act` took a random action.
+    _explored: np.ndarray | None = None
 
     @property
     def algo(self) -> str:
@@ -102,54 +130,68 @@ class BaseAgent(AgentState):
     # collection
     # ---------------------------------------------------------------------------------------------------------
     def collect_step(self) -> None:
-        """Step 1: one epsilon-greedy environment step under the episode's preference, stored in the buffer."""
-        if self._obs is None:
-            self._start_episode()
-        obs, pref = self._obs, self._pref
+        """Step 1: one epsilon-greedy step of each of the ``n_envs`` training envs under its episode's
+        preference (one forward pass acts for all of them), the ``n_envs`` transitions stored in the buffer."""
+        if self._episodes is None:
+            self._episodes = [self._start_episode(i) for i in range(len(self.envs))]
+        eps = self._episodes
+        obs = np.stack([np.asarray(ep.obs) for ep in eps])
+        prefs = np.stack([ep.pref for ep in eps])
         self._explored = None
-        action = self.act(obs, pref, greedy=False)
-        next_obs, reward, terminated, truncated, _ = self.env.step(action)
-        slot = self.buffer.pos
-        self.buffer.add(obs, pref, action, np.asarray(reward, dtype=np.float32), next_obs, terminated,
-                        done=terminated or truncated)
-        self._obs = next_obs
-        self._episode_actions.append(action)
-        if self.config.return_mix:  # the trace of the episode's greedy tail (mope.losses.greedy_tail_returns)
-            self._episode_slots.append(slot)
-            # greedy unless act() explored; a random action equal to the greedy one keeps the trace too
-            explored = self._explored is None or bool(self._explored[0])  # None: an act() that does not say
-            self._episode_greedy.append(not explored or action == int(self.greedy_actions(np.asarray(obs)[None],
-                                                                                          np.asarray(pref)[None])[0]))
-        self.global_step += 1
-        if terminated or truncated:
+        actions = np.asarray(self.act(obs, prefs, greedy=False))
+        steps = [env.step(int(a)) for env, a in zip(self.envs, actions, strict=True)]
+        next_obs = np.stack([np.asarray(s[0]) for s in steps])
+        rewards = np.stack([np.asarray(s[1], dtype=np.float32) for s in steps])
+        terminated = np.array([bool(s[2]) for s in steps])
+        done = terminated | np.array([bool(s[3]) for s in steps])
+        slots = self.buffer.add_batch(obs, prefs, actions, rewards, next_obs, terminated, done)
+        if self.config.return_mix:  # the trace of each episode's greedy tail (mope.losses.greedy_tail_returns)
+            greedy = self._greedy_trace(obs, prefs, actions)
+        self.global_step += len(eps)
+        for i, ep in enumerate(eps):
+            ep.obs = next_obs[i] if len(eps) > 1 else steps[i][0]
+            ep.actions.append(int(actions[i]))
             if self.config.return_mix:
-                self.store_episode_returns(bool(terminated))
-            self.episodes += 1
-            self._start_episode()
+                ep.slots.append(int(slots[i]))
+                ep.greedy.append(bool(greedy[i]))
+            if done[i]:
+                if self.config.return_mix:
+                    self.store_episode_returns(ep, bool(terminated[i]))
+                self.episodes += 1
+                eps[i] = self._start_episode(i)
+
+    def _greedy_trace(self, obs: np.ndarray, prefs: np.ndarray, actions: np.ndarray) -> np.ndarray:
+        """Which of the actions just taken were greedy: those act() did not explore, and the explored ones that
+        equal the greedy action anyway (one forward pass over the explored rows)."""
+        explored = self._explored if self._explored is not None else np.ones(len(actions), dtype=bool)
+        greedy = ~explored
+        if explored.any():
+            greedy[explored] = actions[explored] == self.greedy_actions(obs[explored], prefs[explored])
+        return greedy
 
     @torch.no_grad()
-    def store_episode_returns(self, terminated: bool) -> None:
+    def store_episode_returns(self, episode: Episode, terminated: bool) -> None:
         """At an episode's end: the greedy-tail return of each of its transitions under the episode's preference
         (:func:`mope.losses.greedy_tail_returns`, values of the target network, learner's units), into the buffer."""
-        slots = np.asarray(self._episode_slots, dtype=np.int64)
+        slots = np.asarray(episode.slots, dtype=np.int64)
         if len(slots) == 0:
             return
-        w = self._tensor(self._pref)[None].expand(len(slots), -1)
+        w = self._tensor(episode.pref)[None].expand(len(slots), -1)
         q = self.target_net(self._tensor(self.buffer.next_obs[slots]), w)  # (T, A, m)
         best = torch.einsum("tm,tam->ta", w, q).argmax(dim=1)
         values = q[torch.arange(len(slots), device=q.device), best].cpu().numpy()
         returns = losses.greedy_tail_returns(self.buffer.rewards[slots] * self.config.reward_scale, values,
-                                             np.asarray(self._episode_greedy, dtype=bool), terminated,
+                                             np.asarray(episode.greedy, dtype=bool), terminated,
                                              self.config.gamma)
         self.buffer.set_returns(slots, returns, self.global_step)
 
-    def _start_episode(self) -> None:
-        """Reset the training env (seeded by the episode count) and draw the episode's preference."""
-        self._obs, _ = self.env.reset(seed=self.config.seed + self.episodes)
-        self._pref = self.pref_sampler.sample(self.rng)
-        self._episode_actions = []
-        self._episode_slots: list[int] = []
-        self._episode_greedy: list[bool] = []
+    def _start_episode(self, i: int) -> Episode:
+        """Reset training env ``i`` (seeded by the count of episodes started) and draw the episode's preference
+        from the sampler (which counts it: preference exploration sees every env's draws)."""
+        seed = self.config.seed + self.episodes_started
+        self.episodes_started += 1
+        obs, _ = self.envs[i].reset(seed=seed)
+        return Episode(seed, self.pref_sampler.sample(self.rng), obs)
 
     def train(self, total_timesteps: int | None = None, eval_env: gym.Env | None = None,
               eval_every: int | None = None, callback: Any = None, progress: bool = False

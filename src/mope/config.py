@@ -59,7 +59,8 @@ PRESETS: dict[str, dict[str, Any]] = {
 #: Fields added after mope 0.2.0, with the values that reproduce the runs saved before them: a saved config (it has
 #: every other field) that lacks them is read with these values, not with today's defaults.
 LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0, "reward_scale": 1.0,
-                                "return_mix": 0.0, "return_window": 2_000, "n_step": 1}
+                                "return_mix": 0.0, "return_window": 2_000, "n_step": 1, "n_envs": 1,
+                                "train_freq": 1}
 
 
 def check_preset(name: str) -> str:
@@ -195,7 +196,11 @@ class Config:
     batch_size: int = 128
     buffer_size: int = 20_000
     learning_starts: int = 200
-    #: Gradient updates per environment step.
+    #: Training envs stepped together, one forward pass acting for all (SB3's ``n_envs``).
+    n_envs: int = 1
+    #: Collection steps (each ``n_envs`` env steps) per update round (SB3's ``train_freq``) ...
+    train_freq: int = 1
+    #: ... and gradient updates per round (SB3's ``gradient_steps``), each followed by the Polyak step.
     gradient_steps: int = 1
     #: Hard target-network copy every this many environment steps (Yang et al. use 100).
     target_update_freq: int = 100
@@ -297,39 +302,7 @@ class Config:
     # ------------------------------------------------------------------------------------------------------
     def validate(self) -> None:
         """Raise :class:`ConfigError` naming the first out-of-range hyperparameter."""
-        need = functools.partial(_need, self)
-        need(bool(self.env_id), "env_id", "must be a non-empty string")
-        need(self.seed >= 0, "seed", "must be an integer >= 0")
-        need(self.total_steps >= 1, "total_steps", "must be >= 1")
-        need(self.obs_encoding in ENCODINGS, "obs_encoding", f"choose one of {', '.join(ENCODINGS)}")
-        need(self.q_head in Q_HEADS, "q_head", f"choose one of {', '.join(Q_HEADS)}")
-        need(self.learning_rate_end is None or (_finite(self.learning_rate_end) and self.learning_rate_end > 0),
-             "learning_rate_end", "must be > 0 or None")
-        need(self.target_tau is None or (_finite(self.target_tau) and 0 < self.target_tau <= 1), "target_tau",
-             "must lie in (0, 1] or be None")
-        need(self.max_episode_steps is None or self.max_episode_steps >= 1, "max_episode_steps",
-             "must be >= 1 or None")
-        need(_finite(self.gamma) and 0.0 < self.gamma <= 1.0, "gamma", "must lie in (0, 1]")
-        for name in ("hidden_sizes", "disc_hidden"):
-            need(len(getattr(self, name)) >= 1 and all(h >= 1 for h in getattr(self, name)), name,
-                 "must be one or more positive layer widths")
-        for name in ("learning_rate", "disc_learning_rate", "sigma_omega", "per_eps", "pe_count_offset",
-                     "reward_scale"):
-            need(_finite(getattr(self, name)) and getattr(self, name) > 0, name, "must be > 0")
-        for name in ("batch_size", "gradient_steps", "target_update_freq", "epsilon_decay_steps", "n_omega",
-                     "n_intervals", "n_components", "n_critics", "return_window"):
-            need(getattr(self, name) >= 1, name, "must be >= 1")
-        need(self.buffer_size >= self.batch_size, "buffer_size", f"must be >= batch_size ({self.batch_size})")
-        need(1 <= self.n_step <= 1000, "n_step", "must lie in [1, 1000] (an update runs batch_size x n_step states)")
-        for name in ("learning_starts", "lb_homotopy_steps"):
-            need(getattr(self, name) >= 0, name, "must be >= 0")
-        for name in ("lb_weight", "per_alpha", "mi_alpha", "component_loss_weight", "component_anchor_weight"):
-            need(_finite(getattr(self, name)) and getattr(self, name) >= 0, name, "must be >= 0")
-        need(self.max_grad_norm is None or (_finite(self.max_grad_norm) and self.max_grad_norm > 0),
-             "max_grad_norm", "must be > 0 or None")
-        for name in ("epsilon_start", "epsilon_end", "per_beta_start", "relabel_broad", "return_mix"):
-            need(_finite(getattr(self, name)) and 0.0 <= getattr(self, name) <= 1.0, name, "must lie in [0, 1]")
-        need(self.envelope_prefs in ENVELOPE_PREFS, "envelope_prefs", f"choose one of {', '.join(ENVELOPE_PREFS)}")
+        _validate_hyperparameters(self)
 
     # ------------------------------------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
@@ -401,6 +374,45 @@ class Config:
     def load(cls, path: str | Path) -> Config:
         """Read a config from JSON or YAML."""
         return cls.from_dict(read_config_file(path))
+
+
+def _validate_hyperparameters(self: Config) -> None:
+    """The range checks of :meth:`Config.validate`."""
+    need = functools.partial(_need, self)
+    need(bool(self.env_id), "env_id", "must be a non-empty string")
+    need(self.seed >= 0, "seed", "must be an integer >= 0")
+    need(self.total_steps >= 1, "total_steps", "must be >= 1")
+    need(self.obs_encoding in ENCODINGS, "obs_encoding", f"choose one of {', '.join(ENCODINGS)}")
+    need(self.q_head in Q_HEADS, "q_head", f"choose one of {', '.join(Q_HEADS)}")
+    need(self.learning_rate_end is None or (_finite(self.learning_rate_end) and self.learning_rate_end > 0),
+         "learning_rate_end", "must be > 0 or None")
+    need(self.target_tau is None or (_finite(self.target_tau) and 0 < self.target_tau <= 1), "target_tau",
+         "must lie in (0, 1] or be None")
+    need(self.max_episode_steps is None or self.max_episode_steps >= 1, "max_episode_steps",
+         "must be >= 1 or None")
+    need(_finite(self.gamma) and 0.0 < self.gamma <= 1.0, "gamma", "must lie in (0, 1]")
+    for name in ("hidden_sizes", "disc_hidden"):
+        need(len(getattr(self, name)) >= 1 and all(h >= 1 for h in getattr(self, name)), name,
+             "must be one or more positive layer widths")
+    for name in ("learning_rate", "disc_learning_rate", "sigma_omega", "per_eps", "pe_count_offset",
+                 "reward_scale"):
+        need(_finite(getattr(self, name)) and getattr(self, name) > 0, name, "must be > 0")
+    need(1 <= self.n_envs <= min(1024, self.buffer_size // 2), "n_envs",
+         f"must lie in [1, {min(1024, self.buffer_size // 2)}] (1024, and half of buffer_size at most)")
+    for name in ("batch_size", "gradient_steps", "train_freq", "target_update_freq", "epsilon_decay_steps",
+                 "n_omega", "n_intervals", "n_components", "n_critics", "return_window"):
+        need(getattr(self, name) >= 1, name, "must be >= 1")
+    need(self.buffer_size >= self.batch_size, "buffer_size", f"must be >= batch_size ({self.batch_size})")
+    need(1 <= self.n_step <= 1000, "n_step", "must lie in [1, 1000] (an update runs batch_size x n_step states)")
+    for name in ("learning_starts", "lb_homotopy_steps"):
+        need(getattr(self, name) >= 0, name, "must be >= 0")
+    for name in ("lb_weight", "per_alpha", "mi_alpha", "component_loss_weight", "component_anchor_weight"):
+        need(_finite(getattr(self, name)) and getattr(self, name) >= 0, name, "must be >= 0")
+    need(self.max_grad_norm is None or (_finite(self.max_grad_norm) and self.max_grad_norm > 0),
+         "max_grad_norm", "must be > 0 or None")
+    for name in ("epsilon_start", "epsilon_end", "per_beta_start", "relabel_broad", "return_mix"):
+        need(_finite(getattr(self, name)) and 0.0 <= getattr(self, name) <= 1.0, name, "must lie in [0, 1]")
+    need(self.envelope_prefs in ENVELOPE_PREFS, "envelope_prefs", f"choose one of {', '.join(ENVELOPE_PREFS)}")
 
 
 def read_config_file(path: str | Path) -> dict[str, Any]:

@@ -114,6 +114,12 @@ class ReplayBuffer:
         self.return_steps = np.full(capacity, NO_RETURN, dtype=np.int64)
         self.tree = SumTree(capacity) if prioritized else None
         self.max_priority = 1.0
+        #: Slots ``[0, reserved)`` are kept for good (demonstrations, :meth:`keep_written`); the FIFO ring runs over
+        #: ``[reserved, capacity)``.
+        self.reserved = 0
+        #: Environments that write together (:meth:`add_batch`): each writes every ``stride``-th ring slot, so
+        #: the successor of a transition in its episode is ``stride`` ring slots on.
+        self.stride = 1
         self.pos = 0
         self.full = False
 
@@ -126,19 +132,40 @@ class ReplayBuffer:
 
         ``done`` (default: ``terminated``) says the episode ended here, by termination or the time limit.
         """
-        i = self.pos
-        self.obs[i] = obs
-        self.prefs[i] = pref
-        self.actions[i] = action
-        self.rewards[i] = reward
-        self.next_obs[i] = next_obs
-        self.terminated[i] = float(terminated)
-        self.dones[i] = terminated if done is None else done
-        self.return_steps[i] = NO_RETURN
+        self.add_batch(np.asarray(obs)[None], np.asarray(pref)[None], np.asarray([action]),
+                       np.asarray(reward)[None], np.asarray(next_obs)[None], np.asarray([terminated]),
+                       np.asarray([terminated if done is None else done]))
+
+    def add_batch(self, obs: np.ndarray, prefs: np.ndarray, actions: np.ndarray, rewards: np.ndarray,
+                  next_obs: np.ndarray, terminated: np.ndarray, dones: np.ndarray) -> np.ndarray:
+        """Store one transition per environment (row ``k`` from env ``k``) in consecutive ring slots, each with the
+        largest priority seen so far; returns the slots. The batch size must be :attr:`stride`, except in a
+        buffer whose stride is 1 (any one-by-one writer)."""
+        n = len(actions)
+        ring = self.capacity - self.reserved
+        idx = self.reserved + (self.pos - self.reserved + np.arange(n)) % ring
+        self.obs[idx] = obs
+        self.prefs[idx] = prefs
+        self.actions[idx] = actions
+        self.rewards[idx] = rewards
+        self.next_obs[idx] = next_obs
+        self.terminated[idx] = np.asarray(terminated, dtype=np.float32)
+        self.dones[idx] = dones
+        self.return_steps[idx] = NO_RETURN
         if self.tree is not None:
-            self.tree.update(np.array([i]), np.array([self.max_priority]))
-        self.pos = (i + 1) % self.capacity
-        self.full = self.full or self.pos == 0
+            self.tree.update(idx, np.full(n, self.max_priority))
+        end = self.pos - self.reserved + n
+        self.pos = self.reserved + end % ring
+        self.full = self.full or end >= ring
+        return idx
+
+    def keep_written(self) -> None:
+        """Keep every transition written so far for good (e.g. demonstrations, written first): the FIFO ring
+        then runs over the slots after them."""
+        if self.full or self.pos >= self.capacity - 1:
+            raise ValueError(f"cannot keep {len(self)} transitions for good in a buffer of {self.capacity}: "
+                             "the ring needs at least two slots")
+        self.reserved = self.pos
 
     def sample(self, batch_size: int, rng: np.random.Generator, beta: float = 0.4) -> Batch:
         """Sample a batch; with PER, stratified proportional sampling and IS weights normalised by their max."""
@@ -163,19 +190,29 @@ class ReplayBuffer:
     def sequences(self, idx: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
         """The slots of the ``n`` transitions that start at each index in ``idx`` and whether each is there.
 
-        Transitions of one episode sit in consecutive slots (one environment writes them in order), so the
-        sequence from slot ``i`` is ``i, i+1, ...`` (mod capacity). Step ``k`` is valid while no earlier step
-        ended the episode and the sequence has not reached the write position (the next slot to be written is
-        not a successor of the newest one).
+        Transitions of one episode sit :attr:`stride` ring slots apart (``n_envs`` environments write one slot
+        each in turn), so the sequence from slot ``i`` is ``i, i+stride, ...`` (wrapping inside the ring);
+        reserved slots (demonstrations) hold whole episodes one slot apart. Step ``k`` is valid while no earlier
+        step ended the episode and it was written after step ``k - 1`` (a slot at or past the write position is
+        older, or not written yet).
 
         Returns:
             ``(slots, valid)``, both ``(len(idx), n)``; ``valid[:, 0]`` is all True.
         """
         idx = np.asarray(idx, dtype=np.int64)
-        slots = (idx[:, None] + np.arange(n)) % self.capacity
+        ring, r = self.capacity - self.reserved, self.reserved
+        in_ring = idx >= r
+        # ring slots step by the stride (wrapping inside the ring); reserved slots step by one
+        step = np.where(in_ring, self.stride, 1)[:, None] * np.arange(n)
+        slots = np.where(in_ring[:, None], r + (idx[:, None] - r + step) % ring, idx[:, None] + step)
+        slots = np.minimum(slots, self.capacity - 1)
         valid = np.ones(slots.shape, dtype=bool)
         if n > 1:
-            cont = ~self.dones[slots[:, :-1]] & (slots[:, 1:] != self.pos)
+            # a successor is there while no earlier step ended the episode and it was written after its
+            # predecessor (ring age: writes since; the slot at the write position is the oldest or unwritten)
+            age = (self.pos - 1 - slots) % ring
+            later = np.where(in_ring[:, None], age[:, 1:] < age[:, :-1], True)
+            cont = ~self.dones[slots[:, :-1]] & later
             valid[:, 1:] = np.logical_and.accumulate(cont, axis=1)
         return slots, valid
 
@@ -200,7 +237,7 @@ class ReplayBuffer:
             "terminated": self.terminated[:n].copy(), "dones": self.dones[:n].copy(),
             "returns": self.returns[:n].copy(),
             "return_steps": self.return_steps[:n].copy(), "pos": self.pos, "full": self.full,
-            "max_priority": self.max_priority,
+            "max_priority": self.max_priority, "reserved": self.reserved,
         }
         if self.tree is not None:
             state["priorities"] = self.tree.get(np.arange(n))
@@ -221,5 +258,6 @@ class ReplayBuffer:
             self.dones[:n] = (self.terminated[:n] > 0) | np.any(
                 (self.next_obs[:n] != self.obs[succ]).reshape(n, -1), axis=1)
         self.pos, self.full, self.max_priority = int(state["pos"]), bool(state["full"]), float(state["max_priority"])
+        self.reserved = int(state.get("reserved", 0))
         if self.tree is not None and "priorities" in state:
             self.tree.update(np.arange(n), np.asarray(state["priorities"]))

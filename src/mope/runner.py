@@ -69,9 +69,11 @@ def as_callback(callback: Callback | Sequence[Callback] | None) -> Callback:
 def train(agent: MoPE, total_steps: int, callback: Callback | Sequence[Callback] | None = None) -> bool:
     """Run ``total_steps`` environment steps of ``agent``, continuing from ``agent.global_step``.
 
-    One step: :meth:`~mope.agent.MoPE.collect_step` (act, step the environment, store the transition),
-    :meth:`~mope.agent.MoPE.learn_step` (the updates), :meth:`~mope.agent.MoPE.end_step` (target network), then
-    ``callback.on_step``. The training wall time (evaluations included) accumulates in ``agent.wall_s``.
+    One step: :meth:`~mope.agent.MoPE.collect_step` (act, step the ``n_envs`` environments, store their
+    transitions), :meth:`~mope.agent.MoPE.learn_step` (the updates, every ``train_freq``-th step),
+    :meth:`~mope.agent.MoPE.end_step` (target network, learning rate), then ``callback.on_step``. With
+    ``n_envs`` > 1 a step advances ``global_step`` by ``n_envs``, so a call may end up to ``n_envs - 1`` env
+    steps past ``total_steps``. The training wall time (evaluations included) accumulates in ``agent.wall_s``.
 
     Returns:
         True when all steps ran, False when a callback stopped training early.
@@ -97,6 +99,13 @@ def train(agent: MoPE, total_steps: int, callback: Callback | Sequence[Callback]
     if not stopped:
         agent.wall_s += time.perf_counter() - t0
     return not stopped
+
+
+def crossed_now(agent: MoPE, every: int) -> bool:
+    """Whether the step just taken (``n_envs`` env steps) passed a multiple of ``every`` env steps: what the
+    callbacks' "every N steps" means with several environments."""
+    step, n = agent.global_step, agent.config.n_envs
+    return step // every > (step - n) // every
 
 
 def wall_seconds(agent: MoPE) -> float:
@@ -137,7 +146,7 @@ class EvalCallback(Callback):
         return rec
 
     def on_step(self, agent: MoPE, stats: dict[str, float] | None) -> bool:
-        if self.every and agent.global_step % self.every == 0:
+        if self.every and crossed_now(agent, self.every):
             self.evaluate(agent)
         return True
 
@@ -163,7 +172,7 @@ class ProgressBar(Callback):
                         dynamic_ncols=True, mininterval=0.5)
 
     def on_step(self, agent: MoPE, stats: dict[str, float] | None) -> bool:
-        self.bar.update(1)
+        self.bar.update(agent.config.n_envs)
         records = self.eval_callback.records if self.eval_callback is not None else []
         if len(records) != self._shown:
             self._shown = len(records)
@@ -202,7 +211,7 @@ class IntervalStats(Callback):
             self._count += 1
             for k, v in stats.items():
                 self._sums[k] = self._sums.get(k, 0.0) + v
-        if agent.global_step % self.every == 0 and self._count:
+        if crossed_now(agent, self.every) and self._count:
             row = {"step": agent.global_step, "updates": self._count, "epsilon": agent.epsilon,
                    **{k: v / self._count for k, v in self._sums.items()}}
             self._sums, self._count = {}, 0
@@ -228,5 +237,5 @@ def train_with_evaluation(agent: MoPE, total_timesteps: int | None = None, eval_
     return evaluating.records if evaluating is not None else []
 
 
-__all__ = ["Callback", "CallbackList", "EvalCallback", "IntervalStats", "ProgressBar", "StopWhen", "train",
-           "train_with_evaluation", "wall_seconds"]
+__all__ = ["Callback", "CallbackList", "EvalCallback", "IntervalStats", "ProgressBar", "StopWhen", "crossed_now",
+           "train", "train_with_evaluation", "wall_seconds"]

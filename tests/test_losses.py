@@ -15,6 +15,7 @@ from mope.losses import (
     envelope_target,
     eql_loss,
     greedy_tail_returns,
+    large_margin_loss,
     mix_behaviour_returns,
     mutual_information_bonus,
     preference_interval_td,
@@ -313,3 +314,56 @@ def test_watkins_n_step_targets_hand_values() -> None:
     cut_then_on = torch.tensor([[[True] * 3, [False] * 3, [True] * 3]])
     torch.testing.assert_close(watkins_n_step_targets(rewards, values, cut_then_on, 0.5),
                                torch.full((1, 3, 1), 1 + 0.5 * 10))
+
+
+# DQfD's J_E = max_a [Q(s, a) + l(a_E, a)] - Q(s, a_E), l = margin off the demonstrated action.
+MARGIN_Q = torch.tensor([
+    [1.0, 2.0, 3.0],  # a_E = 2 leads by 1 > margin: J_E = 0
+    [0.0, 2.0, 1.0],  # a_E = 0 trails: J_E = (2 + 0.5) - 0 = 2.5
+    [1.0, 1.0, 0.0],  # a_E = 0 ties with a = 1: J_E = (1 + 0.5) - 1 = 0.5
+    [3.0, 2.8, 0.0],  # a_E = 0 leads by 0.2 < margin: J_E = (2.8 + 0.5) - 3 = 0.3
+])
+MARGIN_A = torch.tensor([2, 0, 0, 0])
+
+
+def test_large_margin_loss_hand_values() -> None:
+    loss = large_margin_loss(MARGIN_Q, MARGIN_A, margin=0.5)
+    torch.testing.assert_close(loss, torch.tensor([0.0, 2.5, 0.5, 0.3]))
+
+
+def test_large_margin_loss_margin_zero_is_the_gap_to_the_best_action() -> None:
+    # without a margin a tie costs nothing and J_E = max_a Q - Q(a_E)
+    loss = large_margin_loss(MARGIN_Q, MARGIN_A, margin=0.0)
+    torch.testing.assert_close(loss, torch.tensor([0.0, 2.0, 0.0, 0.0]))
+
+
+def test_large_margin_loss_mask_zeroes_other_rows_and_ignores_their_actions() -> None:
+    actions = torch.tensor([-1, 0, 7, 0])  # rows 0 and 2 are not demonstrations: their actions are junk
+    mask = torch.tensor([False, True, False, True])
+    loss = large_margin_loss(MARGIN_Q, actions, margin=0.5, mask=mask)
+    torch.testing.assert_close(loss, torch.tensor([0.0, 2.5, 0.0, 0.3]))
+    # a 0/1 float mask selects the same rows
+    loss_f = large_margin_loss(MARGIN_Q, actions, margin=0.5, mask=mask.float())
+    torch.testing.assert_close(loss_f, loss)
+
+
+def test_large_margin_loss_rows_of_preferences_and_gradient() -> None:
+    # (B, N, A) = (2, 2, 3): transition 0 has rows 0 and 1 of MARGIN_Q, transition 1 rows 2 and 3
+    q = MARGIN_Q.view(2, 2, 3).clone().requires_grad_(True)
+    actions = torch.tensor([2, 0])[:, None].expand(-1, 2)  # one action per transition, expanded by the caller
+    loss = large_margin_loss(q, actions, margin=0.5)
+    # row (0, 1) now has a_E = 2 on [0, 2, 1]: (2 + 0.5) - 1 = 1.5
+    torch.testing.assert_close(loss, torch.tensor([[0.0, 1.5], [0.5, 0.3]]))
+    loss.sum().backward()
+    # d J_E / d Q: +1 on the maximising action, -1 on a_E; none where a_E itself is the max (row (0, 0))
+    expected = torch.tensor([[[0.0, 0.0, 0.0], [0.0, 1.0, -1.0]], [[-1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]]])
+    torch.testing.assert_close(q.grad, expected)
+
+
+def test_large_margin_loss_rejects_bad_shapes_and_negative_margin() -> None:
+    with pytest.raises(ValueError, match="expand the actions"):
+        large_margin_loss(MARGIN_Q.view(2, 2, 3), torch.tensor([0, 1]), margin=0.5)
+    with pytest.raises(ValueError, match="mask has shape"):
+        large_margin_loss(MARGIN_Q, MARGIN_A, margin=0.5, mask=torch.ones(3, dtype=torch.bool))
+    with pytest.raises(ValueError, match="margin=-0.1"):
+        large_margin_loss(MARGIN_Q, MARGIN_A, margin=-0.1)

@@ -242,3 +242,51 @@ def priority(td: torch.Tensor, mi_bonus: torch.Tensor | None, alpha: float, eps:
     if mi_bonus is not None:
         p = p + alpha * mi_bonus
     return (p.clamp_min(0.0) + eps).detach().cpu().numpy() ** per_alpha
+
+
+def large_margin_loss(q: torch.Tensor, demo_actions: torch.Tensor, margin: float,
+                      mask: torch.Tensor | None = None) -> torch.Tensor:
+    """DQfD's supervised large-margin loss ``J_E`` per row (Hester et al. 2018, sec. 3, eq. for ``J_E(Q)``).
+
+    ::
+
+        J_E = max_a [Q(s, a) + l(a_E, a)] - Q(s, a_E),    l(a_E, a) = margin if a != a_E else 0
+
+    ``J_E >= 0``, and it is 0 only when the demonstrator's action ``a_E`` beats every other action by at least
+    ``margin``; a tie with another action costs ``margin``. The loss pushes the values of the actions the
+    demonstrator did not take below ``Q(s, a_E)``, so the greedy policy imitates it on its states.
+
+    The agent passes the scalarised Q-values ``w^T Q(s, ., w)`` of its rows. If ``demo_actions`` has fewer
+    dimensions than the rows (one action per transition, ``(B,)``, against ``(B, N, A)``), the caller expands
+    it, e.g. ``demo_actions[:, None].expand(-1, N)``.
+
+    Args:
+        q: ``(..., A)`` scalarised Q-values (``(B, A)`` or ``(B, N, A)``).
+        demo_actions: ``q.shape[:-1]`` integer demonstrator actions in ``[0, A)``; on rows that ``mask`` leaves
+            out any value is accepted (e.g. -1) and ignored.
+        margin: ``l`` for ``a != a_E``, at least 0 (DQfD uses 0.8).
+        mask: ``q.shape[:-1]`` bool (or 0/1) selection of the demonstration rows; ``None`` selects every row.
+
+    Returns:
+        ``q.shape[:-1]`` per-row losses, 0 on rows outside ``mask``, so that the caller can weight them (e.g. by
+        importance-sampling weights) before taking the mean.
+
+    Raises:
+        ValueError: for mismatched shapes or a negative margin.
+    """
+    if margin < 0:
+        raise ValueError(f"large_margin_loss: margin={margin} is out of range: must be >= 0")
+    lead = q.shape[:-1]
+    if demo_actions.shape != lead:
+        raise ValueError(f"large_margin_loss: demo_actions has shape {tuple(demo_actions.shape)}, q has "
+                         f"{tuple(q.shape)}: expand the actions to q's leading shape {tuple(lead)}")
+    if mask is not None and mask.shape != lead:
+        raise ValueError(f"large_margin_loss: mask has shape {tuple(mask.shape)}: need q's leading shape "
+                         f"{tuple(lead)}")
+    sel = torch.ones(lead, dtype=torch.bool, device=q.device) if mask is None else mask.to(torch.bool)
+    actions = torch.where(sel, demo_actions.long(), torch.zeros_like(demo_actions, dtype=torch.long))
+    q_demo = q.gather(-1, actions.unsqueeze(-1)).squeeze(-1)
+    others = torch.full_like(q, float(margin))
+    others.scatter_(-1, actions.unsqueeze(-1), 0.0)
+    loss = (q + others).max(dim=-1).values - q_demo
+    return torch.where(sel, loss, torch.zeros_like(loss))

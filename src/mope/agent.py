@@ -39,6 +39,7 @@ from mope import losses, targets
 from mope.agent_state import resolve_device
 from mope.base import BaseAgent, Episode, linear_schedule
 from mope.config import Config, check_algo
+from mope.demonstrations import Demonstrations, collect_demonstrations, default_demonstrations, load_demonstrations
 from mope.envs import check_env_fits, make_env
 from mope.errors import ConfigError, MopeError
 from mope.networks import ConvexQNetwork, Discriminator, make_q_network
@@ -110,6 +111,81 @@ def check_finite(loss: torch.Tensor, q: torch.Tensor, y: torch.Tensor, step: int
     raise TrainingDivergedError(f"training diverged at step {step}: {what}")
 
 
+def demonstrations_for(cfg: Config, env: gym.Env) -> Demonstrations | None:
+    """The demonstrations ``cfg.demos`` names: ``"scripted"``, ``cfg.demo_episodes`` episodes of each scripted
+    policy registered for the env (each at its own preference range, reset seeds away from training's); a path,
+    the episodes in that file; ``""``, None."""
+    if not cfg.demos:
+        return None
+    spec = check_env_fits(env, cfg.env_id)
+    if cfg.demos != "scripted":
+        return load_demonstrations(cfg.demos, spec.obs_space.shape, spec.n_actions, spec.n_objectives)
+    sources = default_demonstrations(cfg.env_id)
+    if not sources:
+        raise ConfigError(f"demos='scripted': environment '{cfg.env_id}' has no scripted policy; give a file of "
+                          "episodes instead (demos=PATH.npz, see mope.demonstrations.save_demonstrations)")
+    demo_env = make_env(cfg.env_id, cfg.max_episode_steps)
+    return Demonstrations.concatenate([
+        collect_demonstrations(demo_env, name, cfg.demo_episodes, pref_range,
+                               seed=1_000_000 * (k + 1) + 10_000 * cfg.seed)
+        for k, (name, pref_range) in enumerate(sources)])
+
+
+def add_demonstrations(buffer: ReplayBuffer, cfg: Config, env: gym.Env) -> None:
+    """Write the config's demonstrations (:func:`demonstrations_for`) into the first slots of ``buffer`` and keep
+    them there for good (DQfD); their updates add the margin loss J_E."""
+    demos = demonstrations_for(cfg, env)
+    if demos is None:
+        return
+    if len(demos) > cfg.buffer_size // 2:
+        raise ConfigError(f"the demonstrations hold {len(demos)} transitions, more than half of "
+                          f"buffer_size={cfg.buffer_size}; raise buffer_size or use fewer demo_episodes")
+    buffer.add_batch(demos.obs, demos.prefs, demos.actions, demos.rewards, demos.next_obs, demos.terminated,
+                     demos.dones)
+    buffer.keep_written()
+
+
+def relabel_preferences(c: Config, acting_prefs: np.ndarray, m: int, rng: np.random.Generator) -> np.ndarray:
+    """Step 3 of an update: preferences of the training rows, ``(B, N_omega, m)``.
+
+    EQL: N_omega uniform preferences shared by the whole batch (Yang et al. 2019); with ``return_mix`` (the
+    default) the first is the transition's own preference instead, the row that learns the behaviour's return.
+    EE (sec. 3, similar preference exploration): the transition's own ``omega_b`` plus neighbours within
+    sigma_omega; with ``relabel_broad`` > 0, that share of the N_omega rows is drawn uniformly from the simplex.
+    """
+    b = len(acting_prefs)
+    if not c.experience_exploration:
+        shared = sample_simplex(c.n_omega, m, rng)
+        rows = np.repeat(shared[None], b, axis=0)
+        if c.return_mix:  # the row that learns the behaviour's return is the transition's own preference
+            rows[:, 0] = acting_prefs
+        return rows
+    n_broad = min(c.n_omega - 1, round(c.n_omega * c.relabel_broad))
+    near = sample_neighbours(acting_prefs, c.n_omega - 1 - n_broad, c.sigma_omega, rng)
+    rows = [acting_prefs[:, None, :].astype(np.float64), near]
+    if n_broad:
+        rows.append(sample_simplex(b * n_broad, m, rng).reshape(b, n_broad, m))
+    return np.concatenate(rows, axis=1)
+
+
+def resolve_config(cls: type[MoPE], env: gym.Env | str, config: Config | None, overrides: dict[str, Any]) -> Config:
+    """An agent's config: the given one (checked against the class's variant) or the class's variant, plus
+    overrides; the env's id comes from ``env``."""
+    if isinstance(env, str):
+        overrides = {"env_id": env, **overrides}
+    elif env.spec is not None:
+        overrides = {"env_id": env.spec.id, **overrides}
+    elif "env_id" not in overrides and (config is None or config.env_id == Config().env_id):
+        overrides = {"env_id": type(env.unwrapped).__name__, **overrides}  # a hand-built env: name its class
+    if config is None:
+        return Config.for_algo(check_algo(cls.variant), **overrides)
+    cfg = config.replace(**overrides) if overrides else config
+    if cls.strict_variant and cfg.algo != cls.variant:
+        raise ConfigError(f"{cls.__name__} needs a config of algorithm '{cls.variant}', got '{cfg.algo}'; "
+                          f"use Config.for_algo('{cls.variant}', ...) or mope.make_agent('{cfg.algo}', ...)")
+    return cfg
+
+
 class MoPE(BaseAgent):
     """Multi-objective RL with Preference Exploration (and its ablations, including plain EQL).
 
@@ -131,7 +207,7 @@ class MoPE(BaseAgent):
     strict_variant: bool = False
 
     def __init__(self, env: gym.Env | str, config: Config | None = None, **overrides: Any) -> None:
-        self.config = cfg = self._resolve_config(env, config, overrides)
+        self.config = cfg = resolve_config(type(self), env, config, overrides)
         self.env = make_env(cfg.env_id, cfg.max_episode_steps) if isinstance(env, str) else env
         spec = check_env_fits(self.env, cfg.env_id)
         #: The ``n_envs`` training environments (``env`` is the first), stepped together by :meth:`collect_step`.
@@ -172,6 +248,7 @@ class MoPE(BaseAgent):
         obs_dtype = np.float32 if not isinstance(spec.obs_space, gym.spaces.Discrete) else np.int64
         self.buffer = ReplayBuffer(cfg.buffer_size, self.obs_shape, self.m, cfg.per, obs_dtype)
         self.buffer.stride = cfg.n_envs
+        add_demonstrations(self.buffer, cfg, self.env)
         self.global_step = 0
         #: Episodes finished, and started (the next reset's seed is ``seed + episodes_started``).
         self.episodes = 0
@@ -189,23 +266,6 @@ class MoPE(BaseAgent):
         #: Solutions of the latest evaluation in :meth:`train` (uniform preference set), or None.
         self.last_solutions = None
 
-    @classmethod
-    def _resolve_config(cls, env: gym.Env | str, config: Config | None, overrides: dict[str, Any]) -> Config:
-        """The config: the given one (checked against the class's variant) or the class's variant, plus overrides."""
-        if isinstance(env, str):
-            overrides = {"env_id": env, **overrides}
-        elif env.spec is not None:
-            overrides = {"env_id": env.spec.id, **overrides}
-        elif "env_id" not in overrides and (config is None or config.env_id == Config().env_id):
-            overrides = {"env_id": type(env.unwrapped).__name__, **overrides}  # a hand-built env: name its class
-        if config is None:
-            return Config.for_algo(check_algo(cls.variant), **overrides)
-        cfg = config.replace(**overrides) if overrides else config
-        if cls.strict_variant and cfg.algo != cls.variant:
-            raise ConfigError(f"{cls.__name__} needs a config of algorithm '{cls.variant}', got '{cfg.algo}'; "
-                              f"use Config.for_algo('{cls.variant}', ...) or mope.make_agent('{cfg.algo}', ...)")
-        return cfg
-
     # ---------------------------------------------------------------------------------------------------------
     # learning
     # ---------------------------------------------------------------------------------------------------------
@@ -219,11 +279,23 @@ class MoPE(BaseAgent):
         stats = None
         for _ in range(c.gradient_steps):
             stats = self.update()
-            if c.target_tau is not None:
-                with torch.no_grad():
-                    torch._foreach_lerp_(list(self.target_net.parameters()), list(self.q_net.parameters()),
-                                         c.target_tau)
+            self._polyak()
         return stats
+
+    def pretrain(self) -> dict[str, float] | None:
+        """DQfD's pre-training: ``demo_pretrain_steps`` updates (each with its Polyak step) on the demonstrations
+        alone, before the first env step; the last update's statistics."""
+        stats = None
+        for _ in range(self.config.demo_pretrain_steps if self.buffer.reserved else 0):
+            stats = self.update()
+            self._polyak()
+        return stats
+
+    def _polyak(self) -> None:
+        if self.config.target_tau is not None:
+            with torch.no_grad():
+                torch._foreach_lerp_(list(self.target_net.parameters()), list(self.q_net.parameters()),
+                                     self.config.target_tau)
 
     def end_step(self) -> None:
         """Housekeeping after a collection step: the hard target-network copy (every ``target_update_freq`` env
@@ -236,27 +308,8 @@ class MoPE(BaseAgent):
                 group["lr"] = cosine_schedule(c.learning_rate, c.learning_rate_end, c.total_steps, self.global_step)
 
     def relabel(self, acting_prefs: np.ndarray) -> np.ndarray:
-        """Step 3: preferences of the training rows, ``(B, N_omega, m)``.
-
-        EQL: N_omega uniform preferences shared by the whole batch (Yang et al. 2019); with ``return_mix`` (the
-        default) the first is the transition's own preference instead, the row that learns the behaviour's return.
-        EE (sec. 3, similar preference exploration): the transition's own ``omega_b`` plus neighbours within
-        sigma_omega; with ``relabel_broad`` > 0, that share of the N_omega rows is drawn uniformly from the simplex.
-        """
-        c = self.config
-        b = len(acting_prefs)
-        if not c.experience_exploration:
-            shared = sample_simplex(c.n_omega, self.m, self.rng)
-            rows = np.repeat(shared[None], b, axis=0)
-            if c.return_mix:  # the row that learns the behaviour's return is the transition's own preference
-                rows[:, 0] = acting_prefs
-            return rows
-        n_broad = min(c.n_omega - 1, round(c.n_omega * c.relabel_broad))
-        near = sample_neighbours(acting_prefs, c.n_omega - 1 - n_broad, c.sigma_omega, self.rng)
-        rows = [acting_prefs[:, None, :].astype(np.float64), near]
-        if n_broad:
-            rows.append(sample_simplex(b * n_broad, self.m, self.rng).reshape(b, n_broad, self.m))
-        return np.concatenate(rows, axis=1)
+        """Step 3: preferences of the training rows, ``(B, N_omega, m)`` (:func:`relabel_preferences`)."""
+        return relabel_preferences(self.config, acting_prefs, self.m, self.rng)
 
     def update(self) -> dict[str, float]:
         """Steps 2-5 of the module docstring: one gradient step on a sampled batch; returns its statistics."""
@@ -265,8 +318,9 @@ class MoPE(BaseAgent):
         obs, actions, acting = self._tensor(batch.obs), self._tensor(batch.actions, torch.int64), \
             self._tensor(batch.prefs)
         w = self._tensor(self.relabel(batch.prefs))                                               # 3
-        y = self._envelope_target(batch, w, acting)                                               # 4: eq. 4
-        q, loss_rows, parts = self._eql_loss(obs, actions, w, y)                                   # 4: eq. 4
+        demo = self._tensor(batch.indices < self.buffer.reserved, torch.bool)  # demonstrations (kept slots)
+        y = self._envelope_target(batch, w, acting, demo)                                         # 4: eq. 4
+        q, loss_rows, parts = self._eql_loss(obs, actions, w, y, demo)                             # 4: eq. 4 + J_E
         loss = (self._tensor(batch.weights) * loss_rows).mean()
         check_finite(loss, q, y, self.global_step)
         self._gradient_step(loss)
@@ -276,23 +330,29 @@ class MoPE(BaseAgent):
         self.last_losses = update_statistics(loss, parts, td, q.detach(), w, bonus, disc_loss, c.reward_scale)
         return self.last_losses
 
-    def _eql_loss(self, obs: torch.Tensor, actions: torch.Tensor, w: torch.Tensor, y: torch.Tensor
-                  ) -> tuple[torch.Tensor, torch.Tensor, dict[str, torch.Tensor]]:
+    def _eql_loss(self, obs: torch.Tensor, actions: torch.Tensor, w: torch.Tensor, y: torch.Tensor,
+                  demo: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, dict[str, torch.Tensor]]:
         """Q(s, a, w) of the taken actions and the per-transition loss: eq. 4 (with the L^B weight or homotopy of
-        the config), plus the convex head's component loss."""
+        the config), plus the convex head's component loss and, on demonstrations, DQfD's margin loss J_E at the
+        demonstrated preference (row 0)."""
         c = self.config
         heads = 1
         if isinstance(self.q_net, ConvexQNetwork):  # every head learns the same targets (rows b*H + h)
             comps = self.q_net.components(obs)  # (B, H, A, C, m)
             heads = comps.shape[1]
             q_all = self.q_net.select(comps, w).flatten(0, 1)  # (B*H, N, A, m)
-            actions, w, y = (t.repeat_interleave(heads, dim=0) for t in (actions, w, y))
+            actions, w, y, demo = (t.repeat_interleave(heads, dim=0) for t in (actions, w, y, demo))
             q = losses.taken_action_q(q_all, actions)
             comp_loss = losses.component_loss(comps.flatten(0, 1)[torch.arange(len(actions)), actions], y,
                                               c.component_anchor_weight)
         else:
-            q = losses.taken_action_q(self.q_net.forward_prefs(obs, w), actions)
+            q_all = self.q_net.forward_prefs(obs, w)
+            q = losses.taken_action_q(q_all, actions)
             comp_loss = None
+        margin = None
+        if self.buffer.reserved and c.demo_loss_weight > 0:
+            scalar = torch.einsum("bam,bm->ba", q_all[:, 0], w[:, 0])
+            margin = losses.large_margin_loss(scalar, actions, c.demo_margin, demo)
         if c.lb_homotopy_steps:  # Yang et al.'s homotopy: (1 - lambda) L^A + lambda L^B, lambda rising to lb_weight
             lam = c.lb_weight * min(1.0, self.global_step / c.lb_homotopy_steps)
             _, l_a, l_b = losses.eql_loss(q, y, w)
@@ -303,6 +363,9 @@ class MoPE(BaseAgent):
         if comp_loss is not None:
             loss_rows = loss_rows + c.component_loss_weight * comp_loss
             parts["loss_components"] = comp_loss
+        if margin is not None:
+            loss_rows = loss_rows + c.demo_loss_weight * margin
+            parts["loss_margin"] = margin
         if heads > 1:  # per transition: the heads' losses summed, their statistics and Q averaged
             loss_rows = loss_rows.view(-1, heads).sum(1)
             parts = {k: v.view(-1, heads).mean(1) for k, v in parts.items()}
@@ -314,12 +377,15 @@ class MoPE(BaseAgent):
         return linear_schedule(c.per_beta_start, 1.0, c.total_steps, self.global_step)
 
     @torch.no_grad()
-    def _envelope_target(self, batch: Batch, w: torch.Tensor, acting: torch.Tensor) -> torch.Tensor:
-        """Target y of eq. 4 (:mod:`mope.targets`: one step, or ``n_step`` with each row's Watkins cut), clamped
-        to the return bounds and, with ``return_mix``, blended with the behaviour's greedy-tail returns."""
+    def _envelope_target(self, batch: Batch, w: torch.Tensor, acting: torch.Tensor,
+                         demo: torch.Tensor | None = None) -> torch.Tensor:
+        """Target y of eq. 4 (:mod:`mope.targets`: one step, or ``n_step`` with each row's Watkins cut, none on
+        demonstrations), clamped to the return bounds and, with ``return_mix``, blended with the behaviour's
+        greedy-tail returns."""
         c = self.config
         if c.n_step > 1:
-            y = targets.n_step_target(self.q_net, self.target_net, self.buffer, batch.indices, w, acting, c, c.n_step)
+            y = targets.n_step_target(self.q_net, self.target_net, self.buffer, batch.indices, w, acting, c, c.n_step,
+                                      uncut=demo)
         else:
             y = targets.one_step_target(self.q_net, self.target_net, self.buffer, batch.indices, w, acting, c)
         y = losses.clip_targets(y, self._q_low_t, self._q_high_t) if c.clip_targets else y

@@ -60,7 +60,8 @@ PRESETS: dict[str, dict[str, Any]] = {
 #: every other field) that lacks them is read with these values, not with today's defaults.
 LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0, "reward_scale": 1.0,
                                 "return_mix": 0.0, "return_window": 2_000, "n_step": 1, "n_envs": 1,
-                                "train_freq": 1}
+                                "train_freq": 1, "demos": "", "demo_episodes": 100, "demo_margin": 0.8,
+                                "demo_loss_weight": 1.0, "demo_pretrain_steps": 0}
 
 
 def check_preset(name: str) -> str:
@@ -257,6 +258,19 @@ class Config:
     #: The constant in p(omega) ~ (N_i + c)^(-1/2); the paper uses 0.01.
     pe_count_offset: float = 0.01
 
+    # --- demonstrations (DQfD, Hester et al. 2018; mope.demonstrations) ----------------------------------------
+    #: "" (none), "scripted" (the env's scripted policies, each at the preferences it is good at), or an .npz file
+    #: of episodes (mope.demonstrations.save_demonstrations). Kept in replay for good.
+    demos: str = ""
+    #: Episodes collected from each scripted policy (a file is used whole).
+    demo_episodes: int = 100
+    #: The large margin l(a_E, a) of the supervised loss J_E, and its weight in the loss (0: demonstrations are
+    #: replayed, without the margin loss).
+    demo_margin: float = 0.8
+    demo_loss_weight: float = 1.0
+    #: Updates on the demonstrations alone before the first env step.
+    demo_pretrain_steps: int = 0
+
     run: RunSettings = field(default_factory=RunSettings)
 
     def __post_init__(self) -> None:
@@ -404,9 +418,11 @@ def _validate_hyperparameters(self: Config) -> None:
         need(getattr(self, name) >= 1, name, "must be >= 1")
     need(self.buffer_size >= self.batch_size, "buffer_size", f"must be >= batch_size ({self.batch_size})")
     need(1 <= self.n_step <= 1000, "n_step", "must lie in [1, 1000] (an update runs batch_size x n_step states)")
-    for name in ("learning_starts", "lb_homotopy_steps"):
+    for name in ("learning_starts", "lb_homotopy_steps", "demo_pretrain_steps"):
         need(getattr(self, name) >= 0, name, "must be >= 0")
-    for name in ("lb_weight", "per_alpha", "mi_alpha", "component_loss_weight", "component_anchor_weight"):
+    need(self.demo_episodes >= 1, "demo_episodes", "must be >= 1")
+    for name in ("lb_weight", "per_alpha", "mi_alpha", "component_loss_weight", "component_anchor_weight",
+                 "demo_margin", "demo_loss_weight"):
         need(_finite(getattr(self, name)) and getattr(self, name) >= 0, name, "must be >= 0")
     need(self.max_grad_norm is None or (_finite(self.max_grad_norm) and self.max_grad_norm > 0),
          "max_grad_norm", "must be > 0 or None")

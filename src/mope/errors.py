@@ -45,6 +45,10 @@ class CheckpointError(MopeError):
     """A checkpoint cannot be read, is unsafe, or does not fit."""
 
 
+class DemonstrationError(MopeError):
+    """Demonstrations (a scripted policy, a callable or a file of episodes) cannot be collected, read or used."""
+
+
 def suggest(name: str, choices: Iterable[str]) -> str:
     """Return ``" (did you mean 'x'?)"`` for the closest choice, or an empty string."""
     match = difflib.get_close_matches(name, list(choices), n=1, cutoff=0.5)

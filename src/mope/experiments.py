@@ -47,7 +47,7 @@ from mope.evaluation import OUTCOME_KEYS, TRUTH_KEYS, Evaluator, Solutions, solu
 from mope.locks import FolderLock
 from mope.metrics import EVALUATE_KEYS
 from mope.preferences import validate_preference
-from mope.runner import Callback, EvalCallback, IntervalStats, ProgressBar, StopWhen, train
+from mope.runner import Callback, EvalCallback, IntervalStats, ProgressBar, StopWhen, crossed_now, train
 
 METRIC_COLUMNS = ["step", "wall_s", *EVALUATE_KEYS, "timeout_share", *TRUTH_KEYS, *OUTCOME_KEYS, "loss", "epsilon",
                   "train_s"]
@@ -242,7 +242,7 @@ class _Checkpoints(Callback):
         self.out, self.every = out, every
 
     def on_step(self, agent: MoPE, stats: dict[str, float] | None) -> bool:
-        if self.every and agent.global_step % self.every == 0:
+        if self.every and crossed_now(agent, self.every):
             # resume.pt first: once step_N.pt is there, the resumable state of step N is too
             agent.save(self.out / "checkpoints" / RESUME_CHECKPOINT, include_buffer=True)
             agent.save(self.out / "checkpoints" / f"step_{agent.global_step}.pt")

@@ -84,6 +84,8 @@ def train(agent: MoPE, total_steps: int, callback: Callback | Sequence[Callback]
     t0 = time.perf_counter()
     agent.train_started = t0  # type: ignore[attr-defined] - lets callbacks report wall time mid-call
     cb.on_training_start(agent, total_steps)
+    if agent.global_step == 0 and len(agent.buffer) == agent.buffer.reserved:  # only demonstrations so far
+        agent.pretrain()
     end = agent.global_step + total_steps
     stopped = False
     while agent.global_step < end:

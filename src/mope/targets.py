@@ -39,11 +39,13 @@ def one_step_target(q_net: nn.Module, target_net: nn.Module, buffer: ReplayBuffe
 
 @torch.no_grad()
 def n_step_target(q_net: nn.Module, target_net: nn.Module, buffer: ReplayBuffer, idx: np.ndarray,
-                  w: torch.Tensor, acting: torch.Tensor, cfg: Config, n: int) -> torch.Tensor:
+                  w: torch.Tensor, acting: torch.Tensor, cfg: Config, n: int,
+                  uncut: torch.Tensor | None = None) -> torch.Tensor:
     """Eq. 4's target over ``n`` stored steps, each row cut where its preference's greedy action differs from the
     stored one (:func:`mope.losses.watkins_n_step_targets`). One pass of each network over the ``B x n`` next
     states gives the envelope value after every step and the rows' greedy actions. ``n = 1`` is
-    :func:`one_step_target`."""
+    :func:`one_step_target`. Transitions flagged in ``uncut`` (``(B,)``, demonstrations: DQfD's n-step return)
+    are cut only at their episode's end."""
     dev = w.device
     b, rows, m = w.shape
     slots, valid = buffer.sequences(idx, n)
@@ -53,7 +55,10 @@ def n_step_target(q_net: nn.Module, target_net: nn.Module, buffer: ReplayBuffer,
     values, greedy = values * not_end, greedy.view(b, n, rows)
     taken = _t(buffer.actions[slots], dev, torch.int64)  # (B, n)
     cont = torch.zeros(b, n, rows, dtype=torch.bool, device=dev)
-    cont[:, 1:] = _t(valid[:, 1:], dev, torch.bool).unsqueeze(-1) & (greedy[:, :-1] == taken[:, 1:, None])
+    same = greedy[:, :-1] == taken[:, 1:, None]
+    if uncut is not None:
+        same = same | uncut[:, None, None]
+    cont[:, 1:] = _t(valid[:, 1:], dev, torch.bool).unsqueeze(-1) & same
     rewards = _t(buffer.rewards[slots], dev) * cfg.reward_scale
     return losses.watkins_n_step_targets(rewards, values.view(b, n, rows, m), cont, cfg.gamma)
 

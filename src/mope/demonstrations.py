@@ -268,8 +268,8 @@ def load_demonstrations(path: str | Path, obs_shape: Sequence[int] | None = None
     """
     p = Path(path)
     if not p.is_file():
-        raise DemonstrationError(f"demonstration file '{p}' does not exist: give the path of an .npz written by "
-                                 f"save_demonstrations")
+        raise DemonstrationError(f"demonstration file '{p}' does not exist (or is not a file): give the path of "
+                                 f"an .npz written by save_demonstrations")
     try:
         archive = np.load(p, allow_pickle=False)
     except Exception as exc:

@@ -104,3 +104,18 @@ def test_a_short_training_with_demonstrations_beats_one_without() -> None:
         outcomes = [o for w in (1.0, 0.9, 0.8) for o in play_agent(agent, w)[1]]
         wins[demos] = sum(o == "red_win" for o in outcomes) / len(outcomes)
     assert wins["scripted"] >= wins[""] + 0.15, wins
+
+
+def test_environment_defaults_fill_only_what_is_not_given() -> None:
+    from mope import Config
+    from mope.config import ENV_DEFAULTS
+
+    game = ENV_DEFAULTS[C.DISCRETE_ID]
+    cfg = Config.for_algo("mope", env_id=C.DISCRETE_ID)
+    assert all(getattr(cfg, k) == v for k, v in game.items())
+    assert Config.for_algo("mope", env_id=C.DISCRETE_ID, n_envs=2).n_envs == 2  # a given value wins
+    paper = Config.from_dict({"preset": "paper", "env_id": C.DISCRETE_ID})
+    assert paper.demos == "" and paper.n_envs == 1  # the paper's method alone
+    saved = Config.from_dict({**Config(env_id=C.DISCRETE_ID).to_dict()})  # a saved config is read as saved
+    assert saved.demos == "" and saved.n_envs == 1
+    assert Config.for_algo("mope").demos == "" and Config.for_algo("mope").n_envs == 1  # DST: unchanged

@@ -12,7 +12,7 @@ from typing import Annotated, Any
 
 import typer
 
-from mope.config import ALGOS, PRESETS, Config, check_algo, parse_overrides, read_config_file
+from mope.config import ALGOS, ENV_DEFAULTS, PRESETS, Config, check_algo, parse_overrides, read_config_file
 from mope.errors import ConfigError, MopeError, one_line
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -32,7 +32,14 @@ def _default(name: str) -> str:
     return ",".join(map(str, value)) if isinstance(value, list) else str(value)
 
 
-@app.command()
+def _train_help() -> str:
+    lines = ["Train an agent, evaluating CR/HV/EUM as it goes; writes a run folder.", "",
+             "Per-environment defaults, used for every setting not given (--preset paper skips them):"]
+    lines += [f"{env_id}: " + ", ".join(f"{k}={v}" for k, v in d.items()) for env_id, d in ENV_DEFAULTS.items()]
+    return "\n\n".join(lines[:2]) + "\n\n" + "\n\n".join(lines[2:])
+
+
+@app.command(help=_train_help())
 def train(
     env: Annotated[str | None, typer.Option(help=f"Environment id \\[default: {_default('env_id')}]")] = None,
     algo: Annotated[str | None, typer.Option(help=f"Variant: {', '.join(ALGOS)} \\[default: mope]")] = None,

@@ -56,6 +56,14 @@ PRESETS: dict[str, dict[str, Any]] = {
                  "per_alpha": 0.6, "return_mix": 0.0, "n_step": 1, "epsilon_decay_steps": 10_000},
 }
 
+#: Per-environment defaults: ``mope train --env ID`` and ``MoPE(ID)`` use them for every setting not given (by a
+#: flag, ``--set``, a config file or a keyword); a preset other than ``mope`` (``--preset paper``) skips them. Each
+#: is the recipe its environment's study chose (docs/results/game-study for the robot game).
+ENV_DEFAULTS: dict[str, dict[str, Any]] = {
+    "mope/RobotConfrontationDiscrete-v0": {"n_envs": 8, "buffer_size": 100_000, "demos": "scripted",
+                                           "demo_episodes": 50},
+}
+
 #: Fields added after mope 0.2.0, with the values that reproduce the runs saved before them: a saved config (it has
 #: every other field) that lacks them is read with these values, not with today's defaults.
 LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0, "reward_scale": 1.0,
@@ -358,6 +366,8 @@ class Config:
         if later and "q_head" in data and set(names) - set(data) == set(later):  # saved before these fields
             data = {**{k: LATER_FIELDS[k] for k in later}, **data}
         preset = data.pop("preset", None)
+        if preset in (None, "mope") and data.get("env_id") in ENV_DEFAULTS:
+            data = {**ENV_DEFAULTS[data["env_id"]], **data}
         if preset is not None:
             data = {**PRESETS[check_preset(preset)], **data}
         algo = data.pop("algo", None)

@@ -281,7 +281,7 @@ def test_mope_agent_trains_and_evaluates_on_the_discrete_id() -> None:
     from mope.agent import MoPE
     from mope.evaluation import Evaluator
 
-    agent = MoPE(C.DISCRETE_ID, seed=0, n_omega=4, learning_starts=16, batch_size=8, total_steps=40)
+    agent = MoPE(C.DISCRETE_ID, seed=0, n_omega=4, learning_starts=16, batch_size=8, total_steps=40, demos="")
     agent.train(40)
     assert agent.global_step == 40 and agent.n_actions == 15 and agent.m == 2
     ev = Evaluator(make_env(C.DISCRETE_ID), C.DISCRETE_ID, 0.99, n_prefs=3, seed=0, max_steps=12,

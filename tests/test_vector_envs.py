@@ -172,3 +172,16 @@ def test_kept_transitions_stay_while_the_ring_turns() -> None:
     again = ReplayBuffer(8, (2,), 2, prioritized=True)
     again.load_state_dict(state)
     assert again.reserved == 3 and again.pos == buf.pos
+
+
+def test_a_fixed_share_of_every_batch_comes_from_the_kept_slots() -> None:
+    buf = ReplayBuffer(50, (2,), 2, prioritized=True)
+    for t in range(4):
+        buf.add(np.array([9, t]), np.array([0.5, 0.5]), 0, np.zeros(2), np.array([9, t + 1]), False, done=t == 3)
+    buf.keep_written()
+    for t in range(40):
+        buf.add(np.array([0, t]), np.array([0.5, 0.5]), 1, np.zeros(2), np.array([0, t + 1]), False)
+    batch = buf.sample(16, np.random.default_rng(0), kept=6)
+    assert len(batch.indices) == 16 and (batch.indices[10:] < 4).all()
+    np.testing.assert_array_equal(batch.weights[10:], 1.0)
+    assert buf.sample(16, np.random.default_rng(0)).indices.shape == (16,)

@@ -314,7 +314,8 @@ class MoPE(BaseAgent):
     def update(self) -> dict[str, float]:
         """Steps 2-5 of the module docstring: one gradient step on a sampled batch; returns its statistics."""
         c = self.config
-        batch = self.buffer.sample(c.batch_size, self.rng, self._per_beta())                      # 2
+        batch = self.buffer.sample(c.batch_size, self.rng, self._per_beta(),                      # 2
+                                   round(c.batch_size * c.demo_batch_share))
         obs, actions, acting = self._tensor(batch.obs), self._tensor(batch.actions, torch.int64), \
             self._tensor(batch.prefs)
         w = self._tensor(self.relabel(batch.prefs))                                               # 3

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mope.errors import ConfigError, suggest
+from mope.errors import ConfigError, short_repr, suggest
 
 #: Algorithm name -> (experience_exploration, preference_exploration). Fig. 2 of the paper. The one place that
 #: maps a variant to its switches (read it through :meth:`Config.for_algo`).
@@ -69,7 +69,8 @@ ENV_DEFAULTS: dict[str, dict[str, Any]] = {
 LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0, "reward_scale": 1.0,
                                 "return_mix": 0.0, "return_window": 2_000, "n_step": 1, "n_envs": 1,
                                 "train_freq": 1, "demos": "", "demo_episodes": 100, "demo_margin": 0.8,
-                                "demo_loss_weight": 1.0, "demo_pretrain_steps": 0}
+                                "demo_loss_weight": 1.0, "demo_pretrain_steps": 0,
+                                "demo_batch_share": 0.0}
 
 
 def check_preset(name: str) -> str:
@@ -106,20 +107,36 @@ _TYPE_CHECKS: dict[str, tuple[Callable[[Any], bool], str]] = {
 }
 
 
+#: Integers must fit a signed 64-bit integer: numpy's and torch's seeds, array sizes and step counters are 64-bit,
+#: and a bigger number fails deep inside them (``Overflow when unpacking long long``).
+INT64_MAX = 2**63 - 1
+
+
+def _too_big(value: Any) -> bool:
+    """An integer (or an integer in a list) beyond 64 bits."""
+    if isinstance(value, (list, tuple)):
+        return any(_is_int(v) and abs(v) > INT64_MAX for v in value)
+    return _is_int(value) and abs(value) > INT64_MAX
+
+
 def _check_types(obj: Any) -> None:
-    """Raise :class:`ConfigError` for a field of the wrong type (a quoted number, a bool for a count, ...)."""
+    """Raise :class:`ConfigError` for a field of the wrong type (a quoted number, a bool for a count, ...) or an
+    integer beyond 64 bits. Values are shown cut short: no check formats a huge value whole."""
     for f in dataclasses.fields(obj):
         if f.type not in _TYPE_CHECKS:
             continue
         ok, what = _TYPE_CHECKS[f.type]
         value = getattr(obj, f.name)
         if not ok(value):
-            raise ConfigError(f"{f.name}={value!r} is not {what}")
+            raise ConfigError(f"{f.name}={short_repr(value)} is not {what}")
+        if _too_big(value):
+            raise ConfigError(f"{f.name}={short_repr(value)} is out of range: integers must lie in "
+                              f"[-{INT64_MAX}, {INT64_MAX}] (64 bits)")
 
 
 def _need(obj: Any, ok: bool, name: str, allowed: str) -> None:
     if not ok:
-        raise ConfigError(f"{name}={getattr(obj, name)!r} is out of range: {allowed}")
+        raise ConfigError(f"{name}={short_repr(getattr(obj, name))} is out of range: {allowed}")
 
 
 @dataclass
@@ -278,6 +295,8 @@ class Config:
     demo_loss_weight: float = 1.0
     #: Updates on the demonstrations alone before the first env step.
     demo_pretrain_steps: int = 0
+    #: Share of every batch drawn uniformly from the demonstrations (0: they compete in prioritized replay).
+    demo_batch_share: float = 0.0
 
     run: RunSettings = field(default_factory=RunSettings)
 
@@ -436,7 +455,7 @@ def _validate_hyperparameters(self: Config) -> None:
         need(_finite(getattr(self, name)) and getattr(self, name) >= 0, name, "must be >= 0")
     need(self.max_grad_norm is None or (_finite(self.max_grad_norm) and self.max_grad_norm > 0),
          "max_grad_norm", "must be > 0 or None")
-    for name in ("epsilon_start", "epsilon_end", "per_beta_start", "relabel_broad", "return_mix"):
+    for name in ("epsilon_start", "epsilon_end", "per_beta_start", "relabel_broad", "return_mix", "demo_batch_share"):
         need(_finite(getattr(self, name)) and 0.0 <= getattr(self, name) <= 1.0, name, "must lie in [0, 1]")
     need(self.envelope_prefs in ENVELOPE_PREFS, "envelope_prefs", f"choose one of {', '.join(ENVELOPE_PREFS)}")
 
@@ -444,25 +463,81 @@ def _validate_hyperparameters(self: Config) -> None:
 def read_config_file(path: str | Path) -> dict[str, Any]:
     """The mapping of settings in a JSON or YAML config file, as written (unresolved)."""
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"config file '{path}' does not exist")
+    text = read_text_file(path, "config file", ConfigError)
     try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
-        raise ConfigError(f"config file '{path}' could not be read: {reason}") from None
-    try:
-        if path.suffix in (".yaml", ".yml"):
-            import yaml
-
-            data = yaml.safe_load(text) or {}
-        else:
-            data = json.loads(text)
+        data = (load_yaml(text) if path.suffix in (".yaml", ".yml") else json.loads(text)) or {}
+        check_size(data)
     except Exception as exc:  # noqa: BLE001 - any parse failure is the user's file
         raise ConfigError(f"config file '{path}' could not be parsed: {_parse_problem(exc)}") from None
     if not isinstance(data, dict):
         raise ConfigError(f"config file '{path}' must hold a mapping of settings")
     return data
+
+
+#: A settings file (a config or a sweep spec) may hold this many values in all, each alias counted where it is used.
+MAX_FILE_VALUES = 100_000
+#: And at most this many bytes.
+MAX_FILE_BYTES = 10_000_000
+
+
+def read_text_file(path: Path, what: str, error: type[ConfigError]) -> str:
+    """The text of a settings file, or ``error`` saying it does not exist, is a folder, is too big or unreadable."""
+    try:
+        if path.is_dir():
+            raise error(f"{what} '{path}' is a folder, not a file")
+        if not path.exists():
+            raise error(f"{what} '{path}' does not exist")
+        if not path.is_file():
+            raise error(f"{what} '{path}' is not a regular file")
+        size = path.stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise error(f"{what} '{path}' holds {size} bytes; a settings file may hold {MAX_FILE_BYTES} at most")
+        return path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        raise error(f"{what} '{path}' could not be read: {reason}") from None
+
+
+class FileTooBigError(ValueError):
+    """A settings file expands to too many values (a parse problem of :func:`read_config_file`)."""
+
+
+def load_yaml(text: str) -> Any:
+    """``yaml.safe_load(text)``, refusing a document that aliases expand beyond :data:`MAX_FILE_VALUES` values (a
+    "billion laughs" file: a few hundred bytes of nested aliases that would take minutes and gigabytes to format)
+    or that holds itself (a recursive alias)."""
+    import yaml
+
+    data = yaml.safe_load(text)
+    check_size(data)
+    return data
+
+
+def check_size(data: Any) -> None:
+    """Raise :class:`FileTooBigError` if ``data`` expands to more than :data:`MAX_FILE_VALUES` values or contains
+    itself. Each distinct list or mapping is visited once, so the check takes time linear in the file."""
+    sizes: dict[int, int] = {}
+
+    def size(x: Any, open_: set[int]) -> int:
+        if not isinstance(x, (list, dict)):
+            return 1
+        key = id(x)
+        if key in open_:
+            raise FileTooBigError("a YAML alias refers to a value that contains it (a recursive value)")
+        if key not in sizes:
+            open_.add(key)
+            items = list(x.keys()) + list(x.values()) if isinstance(x, dict) else x
+            total = 1
+            for item in items:
+                total += size(item, open_)
+                if total > MAX_FILE_VALUES:
+                    raise FileTooBigError(f"it expands to more than {MAX_FILE_VALUES} values (YAML anchors and "
+                                          "aliases nested inside each other); write the values out")
+            open_.discard(key)
+            sizes[key] = total
+        return sizes[key]
+
+    size(data, set())
 
 
 def check_algo(algo: str) -> str:
@@ -526,7 +601,9 @@ def _parse_problem(exc: Exception) -> str:
     mark = getattr(exc, "problem_mark", None)
     if problem and mark is not None:
         return f"{problem} at line {mark.line + 1}, column {mark.column + 1}"
-    return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    if isinstance(exc, RecursionError):
+        return "it nests lists or mappings too deeply"
+    return str(exc).splitlines()[0][:200] if str(exc) else type(exc).__name__
 
 
 _dataclass_init = Config.__init__

@@ -167,11 +167,22 @@ class ReplayBuffer:
                              "the ring needs at least two slots")
         self.reserved = self.pos
 
-    def sample(self, batch_size: int, rng: np.random.Generator, beta: float = 0.4) -> Batch:
-        """Sample a batch; with PER, stratified proportional sampling and IS weights normalised by their max."""
+    def sample(self, batch_size: int, rng: np.random.Generator, beta: float = 0.4, kept: int = 0) -> Batch:
+        """Sample a batch; with PER, stratified proportional sampling and IS weights normalised by their max.
+
+        ``kept`` rows (at the end of the batch) are drawn uniformly from the kept slots (:meth:`keep_written`, e.g.
+        demonstrations) instead, with IS weight 1: a fixed share of every batch, however full the ring is.
+        """
         n = len(self)
         if n == 0:
             raise ValueError("cannot sample from an empty replay buffer")
+        kept = min(kept, batch_size - 1) if self.reserved else 0
+        if kept:
+            batch = self.sample(batch_size - kept, rng, beta)
+            idx = np.concatenate([batch.indices, rng.integers(0, self.reserved, kept)])
+            weights = np.concatenate([batch.weights, np.ones(kept, dtype=np.float32)])
+            return Batch(idx, self.obs[idx], self.prefs[idx], self.actions[idx], self.rewards[idx],
+                         self.next_obs[idx], self.terminated[idx], weights)
         if self.tree is None:
             idx = rng.integers(0, n, size=batch_size)
             weights = np.ones(batch_size, dtype=np.float32)

@@ -8,8 +8,10 @@ unpickled) is refused before anything in it runs.
 
 from __future__ import annotations
 
+import errno
 import os
 import pickle
+import shutil
 import tempfile
 import zipfile
 from pathlib import Path
@@ -58,11 +60,37 @@ def save_checkpoint(path: str | Path, payload: dict[str, Any]) -> Path:
         os.replace(tmp, path)
     except BaseException as exc:
         Path(tmp).unlink(missing_ok=True)
-        if isinstance(exc, OSError):
-            raise CheckpointError(f"cannot write checkpoint '{path}': {exc.strerror or exc}; any previous file "
-                                  "there is unchanged") from None
+        cause = _write_failure(exc, path.parent)
+        if cause is not None:
+            raise CheckpointError(f"cannot write checkpoint '{path}': {cause}; any previous file there is unchanged"
+                                  ) from None
         raise
     return path
+
+
+def _write_failure(exc: BaseException, folder: Path) -> str | None:
+    """Why a checkpoint write failed, if it failed for the file system: an ``OSError``, or the ``RuntimeError`` that
+    torch's zip writer raises on top of one (a full disk ends ``torch.save`` with both); ``None`` otherwise."""
+    seen: list[BaseException] = []
+    e: BaseException | None = exc
+    while e is not None and len(seen) < 5:
+        seen.append(e)
+        e = e.__context__
+    os_error = next((e for e in seen if isinstance(e, OSError)), None)
+    writer = isinstance(exc, RuntimeError) and any(k in str(exc) for k in ("inline_container", "PytorchStreamWriter",
+                                                                           "file write failed"))
+    if os_error is None and not writer:
+        return None
+    if (os_error is not None and os_error.errno in (errno.ENOSPC, errno.EDQUOT)) or _nearly_full(folder):
+        return "the disk is full"
+    return os_error.strerror or str(os_error) if os_error is not None else f"the write failed ({str(exc)[:120]})"
+
+
+def _nearly_full(folder: Path) -> bool:
+    try:
+        return shutil.disk_usage(folder).free < 16 * 2**20
+    except OSError:
+        return False
 
 
 def load_checkpoint(path: str | Path) -> dict[str, Any]:
@@ -82,6 +110,9 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
         data = torch.load(path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as exc:
         msg = str(exc).splitlines()[0] if str(exc) else "unsupported content"
+        if "Unsupported operand" in str(exc):  # random bytes, an old-protocol pickle: no object, only unreadable
+            raise CheckpointError(f"'{path}' is not a mope checkpoint: it is neither a torch archive nor a pickle of "
+                                  "plain data (torch cannot read it); give a checkpoint written by mope") from None
         if "weights_only" in str(exc) or "Unsupported global" in str(exc) or "GLOBAL" in str(exc):
             raise CheckpointError(
                 f"checkpoint '{path}' was refused: it contains pickled objects that are not plain data and could run "

@@ -7,21 +7,29 @@ from __future__ import annotations
 
 import json
 import sys
+import warnings
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 
 from mope.config import ALGOS, ENV_DEFAULTS, PRESETS, Config, check_algo, parse_overrides, read_config_file
-from mope.errors import ConfigError, MopeError, one_line
+from mope.errors import ConfigError, MopeError, is_disk_full, one_line
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Multi-objective RL with Preference Exploration (MoPE) and Envelope Q-learning.")
 
 
 def _fail(message: str) -> None:
-    typer.echo(f"error: {message}", err=True)
+    typer.echo(f"error: {one_line(message)}", err=True)
     raise typer.Exit(2)
+
+
+def quiet_media() -> None:
+    """Keep pygame from probing sound cards and displays (:func:`mope.video.quiet_media`) before it is imported."""
+    from mope.video import quiet_media as quiet
+
+    quiet()
 
 
 _D = Config()
@@ -80,10 +88,9 @@ def train(
         if resume is not None:
             given = {"env": env, "algo": algo, "steps": steps, "seed": seed, "out": out, "config": config, "set": set_,
                      "eval-every": eval_every, "eval-prefs": eval_prefs, "n-omega": n_omega, "sigma-omega": sigma_omega,
-                     "mi-alpha": mi_alpha, "n-intervals": n_intervals, "hidden": hidden, "overwrite": overwrite,
-                     "preset": preset}
+                     "mi-alpha": mi_alpha, "n-intervals": n_intervals, "hidden": hidden, "preset": preset}
             _resume(resume, [f"--{k}" for k, v in given.items() if v is not None and v is not False and v != []],
-                    device, progress)
+                    device, progress, overwrite)
             return
         flags = {"env_id": env, "total_steps": steps, "seed": seed, "eval_every": eval_every,
                  "eval_prefs": eval_prefs, "n_omega": n_omega, "sigma_omega": sigma_omega, "mi_alpha": mi_alpha,
@@ -96,8 +103,11 @@ def train(
         _fail(str(exc))
         return
     except KeyboardInterrupt:
-        typer.echo(f"\ninterrupted; the training state is saved in {run_dir}/checkpoints/resume.pt\n"
-                   f"continue with: mope train --resume {run_dir}", err=True)
+        if run_dir is not None and (Path(run_dir) / "checkpoints" / "resume.pt").is_file():
+            typer.echo(f"\ninterrupted; the training state is saved in {run_dir}/checkpoints/resume.pt\n"
+                       f"continue with: mope train --resume {run_dir}", err=True)
+        else:
+            typer.echo("\ninterrupted before the run's first checkpoint; nothing of it was kept", err=True)
         raise typer.Exit(130) from None
     _print_final(cfg, result)
 
@@ -126,17 +136,25 @@ def _config_from_cli(config_file: Path | None, algo: str | None, flags: dict[str
     return Config.for_algo(variant, **settings)
 
 
-def _resume(run_dir: Path, given: list[str], device: str | None, progress: bool) -> None:
-    """``mope train --resume RUN_DIR``: continue from resume.pt, or start over a run that has none yet."""
+def _resume(run_dir: Path, given: list[str], device: str | None, progress: bool, overwrite: bool = False) -> None:
+    """``mope train --resume RUN_DIR``: continue from resume.pt, or start over a run that has none yet; with
+    ``--overwrite``, start the run over with its saved config (its old results stay until the new run's first
+    checkpoint)."""
     from mope.experiments import RunFolderError, run_status, train_run
 
     if given:
         raise ConfigError(f"--resume continues a run with its saved config; drop {', '.join(given)}")
+    if run_dir.is_file():
+        raise RunFolderError(f"--resume '{run_dir}' is a file; give the run's folder")
     if not (run_dir / "config.json").is_file():
         raise RunFolderError(f"--resume '{run_dir}' is not a mope run folder (no config.json)")
     cfg = Config.load(run_dir / "config.json")
     if device is not None:
         cfg = cfg.replace(device=device)
+    if overwrite:
+        result = train_run(cfg, run_dir, progress=progress, overwrite=True)
+        _print_final(cfg, result)
+        return
     if run_status(run_dir) == "new":
         typer.echo(f"{run_dir} has no checkpoint yet (it was stopped before step {cfg.run.checkpoint_every}): "
                    "starting it over with its saved config", err=True)
@@ -174,11 +192,14 @@ def eval_(
     device: Annotated[str | None, typer.Option(help="cpu, cuda or auto (default: the run's).")] = None,
 ) -> None:
     """Evaluate a trained agent: CR, HV, EUM and more; writes the solution set as CSV."""
+    from mope.evaluation import MAX_EVAL_PREFS
     from mope.experiments import evaluate_checkpoint, resolve_checkpoint
 
     try:
         ckpt = resolve_checkpoint(run_or_checkpoint)
         target = out or ckpt.parent / f"{ckpt.stem}_solutions_{prefs}.csv"
+        if 20_000 <= prefs <= MAX_EVAL_PREFS:
+            typer.echo(f"note: evaluating {prefs} preferences (the paper uses 2000) takes a while", err=True)
         res, _ = evaluate_checkpoint(ckpt, prefs, seed, target, device)
     except MopeError as exc:
         _fail(str(exc))
@@ -197,6 +218,7 @@ def act(
     device: Annotated[str | None, typer.Option(help="cpu, cuda or auto (default: the run's).")] = None,
 ) -> None:
     """Play one greedy episode under a preference and print its return vector (optionally record a GIF)."""
+    quiet_media()
     from mope.experiments import load_agent, play
     from mope.preferences import validate_preference
     from mope.video import record_video
@@ -406,12 +428,10 @@ def report(
 @app.command()
 def envs() -> None:
     """List MO-Gymnasium environments mope's agents can use directly (discrete actions)."""
-    import os
     import warnings
 
+    quiet_media()  # probed pygame envs: no sound card warnings
     import gymnasium as gym
-
-    os.environ.setdefault("SDL_AUDIODRIVER", "dummy")  # probed pygame envs: no sound card warnings
 
     from mope.envs import make_env
 
@@ -452,18 +472,28 @@ def main() -> None:
     """Entry point of the ``mope`` script: usage errors and library errors are one ``error:`` line, exit 2."""
     from typer._click.exceptions import NoArgsIsHelpError, UsageError
 
-    try:
-        rv = app(args=expand_set_args(sys.argv[1:]), standalone_mode=False)
-    except UsageError as exc:
-        if not isinstance(exc, NoArgsIsHelpError):
-            typer.echo(f"error: {one_line(exc.format_message())}", err=True)
-        sys.exit(2)
-    except typer.Abort:
-        sys.exit(130)
-    except MopeError as exc:  # anything that escaped a command
-        typer.echo(f"error: {exc}", err=True)
-        sys.exit(2)
-    sys.exit(rv if isinstance(rv, int) else 0)
+    with warnings.catch_warnings(record=True) as caught:
+        try:
+            rv = app(args=expand_set_args(sys.argv[1:]), standalone_mode=False)
+        except UsageError as exc:
+            if not isinstance(exc, NoArgsIsHelpError):
+                typer.echo(f"error: {one_line(exc.format_message())}", err=True)
+            sys.exit(2)
+        except typer.Abort:
+            sys.exit(130)
+        except MopeError as exc:  # anything that escaped a command
+            typer.echo(f"error: {exc}", err=True)
+            sys.exit(2)
+        except OSError as exc:  # a file system failure no command expected (a full disk, a vanished folder)
+            what = "the disk is full" if is_disk_full(exc) else exc.strerror or str(exc)
+            where = f" ('{exc.filename}')" if exc.filename else ""
+            typer.echo(f"error: {one_line(f'{what}{where}')}", err=True)
+            sys.exit(2)
+    code = rv if isinstance(rv, int) else 0
+    if code != 2:  # warnings would only stand before the error line; shown once each when the command succeeds
+        for w in {(str(w.message), w.category): w for w in caught}.values():
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+    sys.exit(code)
 
 
 if __name__ == "__main__":

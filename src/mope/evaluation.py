@@ -23,6 +23,21 @@ from mope.envs.batched import make_batched
 from mope.preferences import equally_spaced, sample_simplex, validate_preference
 
 DEFAULT_MAX_STEPS = 1000
+#: The most preferences one evaluation rolls out (the paper uses 2,000): beyond it, the solutions, the metrics and
+#: the solutions CSV grow past what a machine holds comfortably.
+MAX_EVAL_PREFS = 200_000
+#: Episodes rolled out together: a bigger evaluation runs in chunks of this many, so the copies of an environment
+#: that cannot be vectorised stay few.
+EVAL_CHUNK = 10_000
+
+
+def check_eval_prefs(n: int, what: str = "n_prefs") -> None:
+    """Refuse more preferences than :data:`MAX_EVAL_PREFS` with a one-line :class:`~mope.errors.MopeError`."""
+    from mope.errors import MopeError
+
+    if n > MAX_EVAL_PREFS:
+        raise MopeError(f"{what}={n} is out of range: one evaluation rolls out {MAX_EVAL_PREFS} preferences at most "
+                        "(the paper uses 2000)")
 
 
 class GreedyPolicy(Protocol):
@@ -116,6 +131,19 @@ def solutions(agent: GreedyPolicy, env: gym.Env, prefs: np.ndarray, gamma: float
     return Solutions(prefs, returns, discounted, lengths, terminated, observations, outcomes)
 
 
+def _chunked(parts: list[Solutions]) -> Solutions:
+    """One :class:`Solutions` of the rows of ``parts``, in order."""
+    if len(parts) == 1:
+        return parts[0]
+
+    def cat(name: str) -> np.ndarray | None:
+        values = [getattr(p, name) for p in parts]
+        return None if any(v is None for v in values) else np.concatenate(values)
+
+    return Solutions(*(cat(f) for f in ("prefs", "returns", "discounted", "lengths", "terminated", "observations",
+                                        "outcomes")))
+
+
 def _close_loops(batch: Any, running: np.ndarray, visited: np.ndarray, returns: np.ndarray, discounted: np.ndarray,
                  lengths: np.ndarray, left: int, discount: float, gamma: float) -> np.ndarray:
     """End, in closed form, the running episodes back in a visited state; return the ones still running.
@@ -197,6 +225,7 @@ class Evaluator:
 
     def __init__(self, env: gym.Env, env_id: str, gamma: float = 0.99, n_prefs: int = 2000, seed: int = 0,
                  max_steps: int | None = None, ref_point: np.ndarray | None = None, n_eum_prefs: int = 100) -> None:
+        check_eval_prefs(n_prefs)
         self.env = env
         self.gamma = gamma
         self.m = int(env.unwrapped.reward_space.shape[0])
@@ -236,8 +265,10 @@ class Evaluator:
             limit; and the uniform-set :class:`Solutions`.
         """
         all_prefs = np.concatenate([self.prefs, self.eum_prefs])
-        sols = solutions(agent, self.env, all_prefs, self.gamma, self.max_steps, record_obs=record_obs,
-                         close_loops=self.close_loops)
+        chunk = len(all_prefs) if record_obs else EVAL_CHUNK  # recorded paths of chunks could differ in length
+        sols = _chunked([solutions(agent, self.env, all_prefs[i:i + chunk], self.gamma, self.max_steps, seed=i,
+                                   record_obs=record_obs, close_loops=self.close_loops)
+                         for i in range(0, len(all_prefs), chunk)])
         n = len(self.prefs)
         uni = sols.subset(slice(0, n))
         result = metrics.evaluate_front(uni.discounted, uni.prefs, true_front=self.front, ref_point=self.ref_point)

@@ -23,13 +23,16 @@ after its step are dropped and re-made, and the continued run equals an uninterr
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
+import math
 import os
 import platform
 import resource
 import shutil
 import signal
+import sys
 import threading
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,7 +45,7 @@ from mope.agent import MoPE, TrainingDivergedError, agent_class
 from mope.checkpoint import mope_version
 from mope.config import Config
 from mope.envs import make_env
-from mope.errors import CheckpointError, MopeError
+from mope.errors import CheckpointError, MopeError, is_disk_full, one_line, short_repr
 from mope.evaluation import OUTCOME_KEYS, TRUTH_KEYS, Evaluator, Solutions, solutions
 from mope.locks import FolderLock
 from mope.metrics import EVALUATE_KEYS
@@ -123,22 +126,53 @@ def write_solutions(path: str | Path, sols: Solutions) -> None:
                         int(row[3]), int(row[4])])
 
 
+def parse_number(text: str | None, path: str | Path, line: int, column: str) -> float | int:
+    """A cell of a numeric CSV log: an int where it was written as one (``100``), else a float (``0.5``, ``nan``),
+    so a row read back and written again keeps its text (``100`` stays ``100``, not ``100.0``).
+
+    Raises:
+        RunFolderError: naming the file, the line and the column of a cell that is not a number.
+    """
+    try:
+        return int(text)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        pass
+    try:
+        return float(text)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise RunFolderError(f"'{path}' line {line}, column {column}: {short_repr(text)} is not a number; fix or "
+                             "delete that row") from None
+
+
+def _read_numeric_csv(path: Path) -> list[dict[str, float]]:
+    try:
+        with open(path, newline="") as f:
+            reader = csv.DictReader(f)
+            rows = []
+            for row in reader:
+                rec = {k: parse_number(v, path, reader.line_num, str(k)) for k, v in row.items() if k is not None}
+                rec["step"] = int(rec["step"]) if "step" in rec and math.isfinite(rec["step"]) else rec.get("step")
+                rows.append(rec)
+            return rows
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        raise RunFolderError(f"'{path}' could not be read: {reason}") from None
+
+
 def read_csv_rows(path: str | Path) -> list[dict[str, float]]:
-    """Rows of a numeric CSV log as floats (``step`` as an int); no rows if the file does not exist."""
+    """Rows of a numeric CSV log (``step`` as an int); no rows if the file does not exist."""
     path = Path(path)
     if not path.is_file():
         return []
-    with open(path) as f:
-        return [{k: int(float(v)) if k == "step" else float(v) for k, v in row.items()} for row in csv.DictReader(f)]
+    return _read_numeric_csv(path)
 
 
 def read_metrics(run_dir: str | Path) -> list[dict[str, float]]:
-    """Rows of a run's ``metrics.csv`` as floats (``step`` as an int)."""
+    """Rows of a run's ``metrics.csv`` (``step`` as an int)."""
     path = Path(run_dir) / "metrics.csv"
     if not path.is_file():
         raise RunFolderError(f"'{run_dir}' has no metrics.csv; is it a mope run folder?")
-    with open(path) as f:
-        return [{k: int(float(v)) if k == "step" else float(v) for k, v in row.items()} for row in csv.DictReader(f)]
+    return _read_numeric_csv(path)
 
 
 def _environment_info() -> dict[str, Any]:
@@ -160,8 +194,10 @@ def _finished_result(out: Path) -> RunResult:
     return RunResult(out, agent, read_metrics(out), summary.get("final", {}), float(summary.get("wall_s", 0.0)))
 
 
-def _resume_or_start(config: Config, out: Path, overwrite: bool, resume: bool) -> tuple[MoPE, list[dict], str]:
-    """The agent to train, the metrics rows to keep, and the run's status before this call."""
+def _resume_or_start(config: Config, out: Path, overwrite: bool, resume: bool
+                     ) -> tuple[MoPE, list[dict], str, _Aside | None]:
+    """The agent to train, the metrics rows to keep, the run's status before this call, and the old run set aside
+    (an overwritten run, or a resumed run that had no checkpoint yet), to restore if the new one fails to start."""
     status = run_status(out) if resume else "new"
     if status != "new":
         saved = Config.load(out / "config.json")
@@ -169,22 +205,225 @@ def _resume_or_start(config: Config, out: Path, overwrite: bool, resume: bool) -
         if differ:
             raise RunFolderError(
                 f"cannot resume '{out}': its config differs in {', '.join(differ)} "
-                f"(saved {', '.join(f'{k}={saved.to_dict()[k]!r}' for k in differ)})")
+                f"(saved {', '.join(f'{k}={short_repr(saved.to_dict()[k])}' for k in differ)})")
     if status == "resumable":
         agent = MoPE.load(out / "checkpoints" / RESUME_CHECKPOINT, device=config.run.device,
                           torch_threads=config.run.torch_threads)
         stale = _same_run(agent.config, config)
         if stale:
             raise RunFolderError(f"cannot resume '{out}': checkpoints/{RESUME_CHECKPOINT} was written by another "
-                                 f"config (it differs in {', '.join(stale)}); pass --overwrite to start again")
+                                 f"config (it differs in {', '.join(stale)}); start it over with: "
+                                 f"mope train --resume {out} --overwrite")
         kept = [r for r in read_metrics(out) if r["step"] <= agent.global_step] if (out / "metrics.csv").is_file() \
             else []
         kept_stats = [r for r in read_csv_rows(out / TRAIN_STATS) if r["step"] <= agent.global_step]
-        return agent, [kept, kept_stats], status
+        return agent, [kept, kept_stats], status, None
     # with resume, a folder that has nothing to resume from (killed before its first checkpoint) restarts
-    prepare_out_dir(out, overwrite or resume)
-    config.save(out / "config.json")
-    return agent_class(config.algo)(config.env_id, config), [[], []], status
+    check_out_dir(out, overwrite or resume)
+    agent = build_agent(config)  # everything that can refuse the new run does so before the old one is touched
+    aside = _Aside.set_aside(out)
+    try:
+        prepare_out_dir(out)
+        config.save(out / "config.json")
+    except BaseException:
+        aside.restore()
+        raise
+    return agent, [[], []], status, aside
+
+
+#: What a run writes in its folder; an overwritten run's are set aside (:class:`_Aside`), anything else stays.
+RUN_ENTRIES = ("summary.json", "solutions.csv", "metrics.csv", TRAIN_STATS, "config.json", "error.txt", "tb",
+               "checkpoints")
+RUN_FOLDERS = ("tb", "checkpoints")
+#: Where an overwritten run waits, inside its folder, until the new run has written its first checkpoint.
+ASIDE_NAME = ".overwritten"
+
+
+class _Aside:
+    """The old run of a folder, moved into ``<folder>/.overwritten`` (renames: nothing is copied or rewritten).
+
+    :meth:`commit` deletes it once the new run has written a checkpoint of its own; :meth:`restore` deletes what the
+    new run wrote and moves the old run back, byte for byte, when the new one fails before that. A process killed in
+    between leaves ``.overwritten`` behind; :func:`recover_aside` deals with it on the next start.
+    """
+
+    def __init__(self, out: Path, moved: list[str], left: tuple[str, ...] = ()) -> None:
+        self.out, self.moved, self.done = out, moved, False
+        #: Entries of run names that were no run's (a file named ``checkpoints``): left in place, never removed.
+        self.left = left
+        self.path = out / ASIDE_NAME
+
+    @classmethod
+    def set_aside(cls, out: Path) -> _Aside:
+        moved = []
+        aside = out / ASIDE_NAME
+        try:
+            for name in RUN_ENTRIES:
+                # only what a run writes: a file where its checkpoints folder should be is no run's and stays
+                if (out / name).is_dir() if name in RUN_FOLDERS else (out / name).is_file():
+                    aside.mkdir(exist_ok=True)
+                    os.rename(out / name, aside / name)
+                    moved.append(name)
+        except OSError as exc:
+            cls(out, moved).restore(remove_new=False)
+            raise RunFolderError(f"cannot set the old run in '{out}' aside: {exc.strerror or exc}; nothing was "
+                                 "deleted") from None
+        return cls(out, moved, tuple(n for n in RUN_ENTRIES if n not in moved and os.path.lexists(out / n)))
+
+    def commit(self) -> None:
+        """The new run has a checkpoint: the old one goes."""
+        if not self.done:
+            self.done = True
+            shutil.rmtree(self.path, ignore_errors=True)
+
+    def restore(self, remove_new: bool = True) -> None:
+        """The new run failed before its first checkpoint: remove what it wrote, put the old run back."""
+        if self.done:
+            return
+        self.done = True
+        if remove_new:
+            _remove_run_entries(self.out, self.left)
+        for name in self.moved:
+            os.rename(self.path / name, self.out / name)
+        with contextlib.suppress(OSError):
+            self.path.rmdir()
+
+
+def _remove_run_entries(out: Path, keep: tuple[str, ...] = ()) -> None:
+    for name in RUN_ENTRIES:
+        if name in keep:
+            continue
+        p = out / name
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p)
+        elif os.path.lexists(p):
+            p.unlink()
+
+
+def recover_aside(out: Path) -> None:
+    """A run set aside by an ``--overwrite`` that was killed (SIGKILL, a power cut) before the new run's first
+    checkpoint: restore it (the new run had nothing worth keeping); if the new run did get a checkpoint, delete it.
+    Called with the folder locked."""
+    aside = out / ASIDE_NAME
+    if not aside.is_dir():
+        return
+    if run_status(out) != "new":
+        shutil.rmtree(aside, ignore_errors=True)
+        return
+    moved = [name for name in RUN_ENTRIES if os.path.lexists(aside / name)]
+    try:
+        _Aside(out, moved).restore()
+    except OSError as exc:
+        raise RunFolderError(f"'{aside}' holds a run that an interrupted --overwrite set aside, and it could not be "
+                             f"moved back ({exc.strerror or exc}); move it back by hand") from None
+    print(f"note: restored the run in '{out}' that an interrupted --overwrite had set aside", file=sys.stderr)
+
+
+def remove_stale_temporaries(out: Path) -> None:
+    """Delete the temporary files of checkpoint writes cut short by a kill (``checkpoints/.resume.pt.*.tmp``);
+    called with the folder locked, so no write of another process is in progress."""
+    for tmp in (out / "checkpoints").glob(".*.pt.*.tmp"):
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+
+
+def check_out_dir(out: Path, overwrite: bool) -> None:
+    """Refuse an output path that is a file, or a folder holding a run when ``overwrite`` is not given; touches
+    nothing."""
+    if out.exists() and not out.is_dir():
+        raise RunFolderError(f"output path '{out}' exists and is not a folder")
+    if (out / "metrics.csv").exists() and not overwrite:
+        hint = " or --resume to continue it" if run_status(out) == "resumable" else ""
+        raise RunFolderError(
+            f"output folder '{out}' already holds a run; choose another --out, pass --overwrite{hint}")
+    probe = out / ".write_test"
+    try:
+        probe.write_text("ok")
+        probe.unlink()
+    except OSError as exc:
+        raise RunFolderError(f"output folder '{out}' is not writable: {exc.strerror or exc}") from None
+
+
+def available_memory() -> int | None:
+    """Bytes of memory this process can still get (MemAvailable plus free swap, capped by a cgroup limit), or None."""
+    avail = None
+    try:
+        info = dict(line.split(":", 1) for line in Path("/proc/meminfo").read_text().splitlines() if ":" in line)
+        avail = (int(info["MemAvailable"].split()[0]) + int(info.get("SwapFree", "0 kB").split()[0])) * 1024
+    except (OSError, KeyError, ValueError):
+        with contextlib.suppress(ValueError, OSError, AttributeError):
+            avail = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    with contextlib.suppress(OSError, ValueError):
+        cg = Path("/sys/fs/cgroup/memory.max").read_text().strip()
+        if cg != "max":
+            used = int(Path("/sys/fs/cgroup/memory.current").read_text().strip())
+            free = max(0, int(cg) - used)
+            avail = free if avail is None else min(avail, free)
+    return avail
+
+
+def _gib(n: float) -> str:
+    return f"{n / 2**30:.1f} GiB" if n >= 2**30 else f"{n / 2**20:.0f} MiB"
+
+
+def estimate_memory(config: Config, env: Any) -> tuple[int, int]:
+    """``(bytes of the replay buffer, bytes per transition)`` of ``config`` on ``env``, plus the networks, Adam's
+    state and the evaluation's environment copies in the first figure: what the agent allocates before it trains."""
+    import gymnasium as gym
+
+    obs_space = env.observation_space
+    m = int(env.unwrapped.reward_space.shape[0])
+    if isinstance(obs_space, gym.spaces.Discrete):
+        obs_bytes, obs_in = 8, int(obs_space.n)
+    else:
+        size = int(np.prod(obs_space.shape or (1,)))
+        obs_bytes, obs_in = 4 * size, size
+    n_actions = int(getattr(env.action_space, "n", 1))
+    # obs and next_obs, preference, action, reward, terminated, done, return, return step, sum tree (two float64
+    # per leaf, capacity rounded up to a power of two)
+    per = 2 * obs_bytes + 3 * 4 * m + 8 + 4 + 1 + 8 + (32 if config.per else 0)
+    widths = [obs_in + m, *config.hidden_sizes, n_actions * m * max(1, config.n_components)]
+    params = sum(a * b + b for a, b in zip(widths, widths[1:], strict=False)) * max(1, config.n_critics)
+    nets = params * 4 * 6  # q and target networks, gradients, Adam's two moments, one spare copy when saving
+    return config.buffer_size * per + nets, per
+
+
+def check_resources(config: Config) -> None:
+    """Refuse, before anything is allocated or touched, a run that cannot start: an unknown or unsupported
+    environment, a device that is not there, more evaluation preferences than :data:`MAX_EVAL_PREFS`, or a replay
+    buffer and networks larger than the memory available."""
+    from mope.agent_state import resolve_device
+    from mope.evaluation import check_eval_prefs
+
+    check_eval_prefs(config.run.eval_prefs, "eval_prefs")
+    resolve_device(config.run.device)
+    env = make_env(config.env_id, config.max_episode_steps)
+    try:
+        need, per = estimate_memory(config, env)
+    finally:
+        with contextlib.suppress(Exception):
+            env.close()
+    avail = available_memory()
+    if avail is not None and need > 0.9 * avail:
+        fit = max(0, int((0.8 * avail - (need - config.buffer_size * per)) // per))
+        raise MopeError(f"buffer_size={config.buffer_size} needs about {_gib(need)} of memory ({per} bytes per "
+                        f"transition, networks included) but {_gib(avail)} is available; lower buffer_size (about "
+                        f"{fit} fits here) or hidden_sizes")
+
+
+def build_agent(config: Config) -> MoPE:
+    """The agent of a new run, after :func:`check_resources`; an allocation that still fails is one line."""
+    check_resources(config)
+    try:
+        return agent_class(config.algo)(config.env_id, config)
+    except MemoryError:
+        raise MopeError(f"out of memory building the agent (buffer_size={config.buffer_size}, hidden_sizes="
+                        f"{list(config.hidden_sizes)}); lower them") from None
+    except RuntimeError as exc:  # torch: "can't allocate memory", CUDA out of memory
+        if "alloc" not in str(exc).lower() and "out of memory" not in str(exc).lower():
+            raise
+        raise MopeError(f"out of memory building the agent ({one_line(str(exc), 120)}); lower buffer_size or "
+                        "hidden_sizes") from None
 
 
 class _RunLogs:
@@ -238,14 +477,16 @@ class _CsvLog:
 class _Checkpoints(Callback):
     """Every ``every`` steps: checkpoints/resume.pt (the whole state), then step_N.pt (weights)."""
 
-    def __init__(self, out: Path, every: int) -> None:
-        self.out, self.every = out, every
+    def __init__(self, out: Path, every: int, aside: _Aside | None = None) -> None:
+        self.out, self.every, self.aside = out, every, aside
 
     def on_step(self, agent: MoPE, stats: dict[str, float] | None) -> bool:
         if self.every and crossed_now(agent, self.every):
             # resume.pt first: once step_N.pt is there, the resumable state of step N is too
             agent.save(self.out / "checkpoints" / RESUME_CHECKPOINT, include_buffer=True)
             agent.save(self.out / "checkpoints" / f"step_{agent.global_step}.pt")
+            if self.aside is not None:
+                self.aside.commit()  # the new run has its first checkpoint: the one it overwrites goes
         return True
 
 
@@ -268,20 +509,64 @@ def train_run(config: Config, out_dir: str | Path, progress: bool = True, overwr
     leaves the last good checkpoints untouched.
     """
     out = Path(out_dir)
-    with FolderLock(out, what="run folder"):
-        if resume and run_status(out) == "finished":
-            saved = Config.load(out / "config.json")
-            differ = _same_run(saved, config)
-            if differ:
-                raise RunFolderError(f"cannot resume '{out}': its config differs in {', '.join(differ)}")
-            return _finished_result(out)
-        agent, (kept, kept_stats), status = _resume_or_start(config, out, overwrite, resume)
-        records = _train_logged(agent, config, out, kept, kept_stats, progress)
-        return _finish_run(agent, config, out, kept + records, status)
+    created = not _exists(out)
+    try:
+        with FolderLock(out, what="run folder"):
+            recover_aside(out)
+            remove_stale_temporaries(out)
+            if resume and run_status(out) == "finished":
+                saved = Config.load(out / "config.json")
+                differ = _same_run(saved, config)
+                if differ:
+                    raise RunFolderError(f"cannot resume '{out}': its config differs in {', '.join(differ)}")
+                return _finished_result(out)
+            agent, (kept, kept_stats), status, aside = _resume_or_start(config, out, overwrite, resume)
+            try:
+                records = _train_logged(agent, config, out, kept, kept_stats, progress, aside)
+                result = _finish_run(agent, config, out, kept + records, status)
+            except BaseException:
+                if aside is not None:
+                    aside.restore()  # no checkpoint of the new run yet (else the old run is gone already)
+                raise
+            if aside is not None:
+                aside.commit()
+            return result
+    except BaseException as exc:
+        if created:  # a folder this call made and left empty (a refused run) is removed again
+            with contextlib.suppress(OSError):
+                out.rmdir()
+        if isinstance(exc, (OSError, CheckpointError)) and _disk_full(exc, out):
+            raise RunFolderError(
+                f"the disk holding '{out}' is full; free some space, then continue with: mope train --resume {out} "
+                "(the last checkpoint in it is intact)") from None
+        if isinstance(exc, OSError):
+            raise RunFolderError(f"run folder '{out}' could not be written: {exc.strerror or exc}; continue with: "
+                                 f"mope train --resume {out}") from None
+        raise
+
+
+def _exists(path: Path) -> bool:
+    try:
+        return path.exists()
+    except OSError as exc:  # a name longer than the file system allows, a loop of links
+        raise RunFolderError(f"output path '{path}' cannot be used: {exc.strerror or exc}") from None
+
+
+def _disk_full(exc: BaseException, out: Path) -> bool:
+    """Whether a failed write in ``out`` was for want of space: ENOSPC, or a checkpoint write (torch reports a full
+    disk as a RuntimeError of its zip writer) on a file system with (almost) nothing left."""
+    if is_disk_full(exc) or "no space left" in str(exc).lower() or "disk is full" in str(exc):
+        return True
+    if isinstance(exc, CheckpointError) and "cannot write checkpoint" in str(exc):
+        try:
+            return shutil.disk_usage(next(p for p in (out, *out.parents) if p.exists())).free < 16 * 2**20
+        except (OSError, StopIteration):
+            return False
+    return False
 
 
 def _train_logged(agent: MoPE, config: Config, out: Path, kept: list[dict], kept_stats: list[dict],
-                  progress: bool) -> list[dict[str, float]]:
+                  progress: bool, aside: _Aside | None = None) -> list[dict[str, float]]:
     """Train the rest of the run with evaluation, logs, checkpoints and signal handling as callbacks."""
     eval_env = make_env(config.env_id, config.max_episode_steps)
     logs = _RunLogs(out, kept, kept_stats)
@@ -294,7 +579,7 @@ def _train_logged(agent: MoPE, config: Config, out: Path, kept: list[dict], kept
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGINT, signal.SIGTERM):
             handlers[sig] = signal.signal(sig, lambda signum, frame: received.append(signum))
-    callbacks: list[Callback] = [evaluating, _Checkpoints(out, config.run.checkpoint_every),
+    callbacks: list[Callback] = [evaluating, _Checkpoints(out, config.run.checkpoint_every, aside),
                                  IntervalStats(config.run.log_every, logs.on_stats), StopWhen(lambda: bool(received))]
     if progress:
         callbacks.insert(0, ProgressBar(evaluating))
@@ -317,6 +602,8 @@ def _train_logged(agent: MoPE, config: Config, out: Path, kept: list[dict], kept
             eval_env.close()
         if received:  # the handlers stay in place until the state is saved: a second signal cannot cut the save
             agent.save(out / "checkpoints" / RESUME_CHECKPOINT, include_buffer=True)
+            if aside is not None:
+                aside.commit()  # the new run is resumable: the one it overwrites goes
             raise KeyboardInterrupt(f"stopped by signal {received[0]} at step {agent.global_step}")
     finally:
         for sig, old_handler in handlers.items():
@@ -365,16 +652,48 @@ def load_agent(path: str | Path, device: str | None = None) -> MoPE:
 def evaluate_checkpoint(path: str | Path, n_prefs: int = 2000, seed: int | None = None,
                         out: str | Path | None = None, device: str | None = None) -> tuple[dict[str, float], Solutions]:
     """Evaluate a checkpoint (or a run's final checkpoint) with the CR protocol; optionally write solutions."""
+    from mope.evaluation import check_eval_prefs
+
     if n_prefs < 1:
         raise MopeError(f"--prefs {n_prefs} is out of range: must be >= 1")
+    check_eval_prefs(n_prefs, "--prefs")
+    if out is not None:
+        check_output_file(out)
     agent = load_agent(path, device)
     c = agent.config
     evaluator = Evaluator.from_config(agent.env, c, n_prefs, seed)
     res, sols = evaluator.evaluate(agent)
     if out is not None:
-        Path(out).parent.mkdir(parents=True, exist_ok=True)
-        write_solutions(out, sols)
+        try:
+            write_solutions(out, sols)
+        except OSError as exc:
+            what = "the disk is full" if is_disk_full(exc) else exc.strerror or str(exc)
+            raise MopeError(f"cannot write the solutions to '{out}': {what}") from None
     return res, sols
+
+
+def check_output_file(path: str | Path, flag: str = "--out") -> Path:
+    """Make sure a result file can be written at ``path`` before the work that makes it starts: not a folder, in a
+    folder that exists or can be made, and that is writable (probed with a temporary file, which is removed).
+
+    Raises:
+        MopeError: naming the path and what to pass instead.
+    """
+    p = Path(path)
+    try:
+        if p.is_dir():
+            raise MopeError(f"{flag} '{p}' is a folder; give a file name, e.g. {p / 'solutions.csv'}")
+        blocker = next((a for a in p.parents if a.exists() and not a.is_dir()), None)
+        if blocker is not None:
+            raise MopeError(f"{flag} '{p}' cannot be written: '{blocker}' is a file, not a folder")
+        p.parent.mkdir(parents=True, exist_ok=True)
+        probe = p.parent / f".mope-write-test-{os.getpid()}"
+        probe.write_text("ok")
+        probe.unlink()
+    except OSError as exc:
+        raise MopeError(f"cannot write '{p}': {exc.strerror or exc}; pass {flag} with a path in a writable "
+                        "folder") from None
+    return p
 
 
 def play(path: str | Path, pref: Any, device: str | None = None, seed: int = 0) -> Solutions:

@@ -16,6 +16,7 @@ import contextlib
 import json
 import multiprocessing
 import os
+import threading
 import time
 import traceback
 from collections.abc import Callable
@@ -227,10 +228,52 @@ def unpack_job(rec: dict[str, Any], out: Path) -> None:
 # ------------------------------------------------------------------------------------------------------------
 # backends
 # ------------------------------------------------------------------------------------------------------------
-def _init_worker() -> None:
+#: Set in a worker whose parent (the batch's main process) is gone.
+_ORPHANED = threading.Event()
+#: Seconds an orphaned worker gives its job to save its resumable state before it exits.
+ORPHAN_GRACE_S = 5.0
+
+
+def _init_worker(parent_pid: int | None = None) -> None:
     import torch
 
     torch.set_num_threads(1)
+    if parent_pid is not None:
+        threading.Thread(target=_watch_parent, args=(parent_pid,), name="mope-parent-watch", daemon=True).start()
+
+
+def _parent_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # exists, owned by someone else
+        return True
+    return True
+
+
+def _watch_parent(parent_pid: int, poll_s: float = 0.25) -> None:
+    """In a pool worker: once the process that started the batch is gone (SIGKILLed: it could not stop its
+    workers), interrupt the job as Ctrl-C would (a training saves its resumable state at the next step), then exit
+    within :data:`ORPHAN_GRACE_S` seconds, instead of training the queued jobs with nobody to report to."""
+    import signal
+
+    while _parent_alive(parent_pid):
+        time.sleep(poll_s)
+    _ORPHANED.set()
+    with contextlib.suppress(OSError):
+        os.kill(os.getpid(), signal.SIGINT)
+    time.sleep(ORPHAN_GRACE_S)
+    os._exit(1)
+
+
+def _pool_job(name: str, kind: str, payload: dict[str, Any], out_dir: str) -> dict[str, Any]:
+    """:func:`run_job` in a pool worker; an orphaned worker exits as soon as its job has stopped."""
+    try:
+        return run_job(name, kind, payload, out_dir)
+    finally:
+        if _ORPHANED.is_set():
+            os._exit(1)
 
 
 class _Summary:
@@ -272,9 +315,10 @@ def _local_backend(jobs: list[tuple[str, str, dict[str, Any], str]], workers: in
                    fresh: bool = False) -> None:
     method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context(method),
-                               initializer=_init_worker, max_tasks_per_child=1 if fresh else None)
+                               initializer=_init_worker, initargs=(os.getpid(),),
+                               max_tasks_per_child=1 if fresh else None)
     try:
-        pending: set[Future] = {pool.submit(run_job, *job) for job in jobs}
+        pending: set[Future] = {pool.submit(_pool_job, *job) for job in jobs}
         while pending:
             finished, pending = wait(pending, timeout=1.0, return_when=FIRST_COMPLETED)
             for fut in finished:
@@ -400,6 +444,8 @@ def run_jobs(jobs: list[Job], out: Path, backend: str = "local", workers: int | 
             final = json.loads((out / job.name / "summary.json").read_text()).get("final", {})
             records[job.name] = {"name": job.name, "status": "finished", "action": "skipped", "final": final,
                                  "wall_s": 0.0, "error": None}
+            with contextlib.suppress(OSError):  # a failure recorded before the job finished is stale now
+                (out / job.name / "error.txt").unlink(missing_ok=True)
             if on_done is not None:
                 on_done(records[job.name])
     todo = [(j.name, j.kind, j.payload, str(out / j.name)) for j in jobs if j.name not in records]

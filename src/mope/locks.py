@@ -10,6 +10,7 @@ is known to be dead.
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
 import socket
@@ -66,16 +67,17 @@ class FolderLock:
             return 0.0
 
     def acquire(self) -> None:
-        key = str(self.path.resolve()) if self.folder.exists() else str(self.path.absolute())
-        if FolderLock._held.get(key):
-            FolderLock._held[key] += 1
-            return
-        if self.folder.exists() and not self.folder.is_dir():
-            raise MopeError(f"output path '{self.folder}' exists and is not a folder")
         try:
+            key = str(self.path.resolve()) if self.folder.exists() else str(self.path.absolute())
+            if FolderLock._held.get(key):
+                FolderLock._held[key] += 1
+                return
+            if self.folder.exists() and not self.folder.is_dir():
+                raise MopeError(f"output path '{self.folder}' exists and is not a folder")
             self.folder.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise MopeError(f"{self.what} '{self.folder}' is not writable: {exc.strerror or exc}") from None
+        except OSError as exc:  # not writable, a name longer than the file system allows, a loop of links
+            how = "cannot be used" if exc.errno in (errno.ENAMETOOLONG, errno.ELOOP) else "is not writable"
+            raise MopeError(f"{self.what} '{self.folder}' {how}: {exc.strerror or exc}") from None
         me = {"pid": os.getpid(), "host": socket.gethostname()}
         for _ in range(3):
             try:
@@ -105,7 +107,10 @@ class FolderLock:
         raise FolderLockedError(f"{self.what} '{self.folder}' could not be locked")
 
     def release(self) -> None:
-        key = str(self.path.resolve())
+        try:
+            key = str(self.path.resolve())
+        except OSError:
+            return
         count = FolderLock._held.get(key, 0)
         if count > 1:
             FolderLock._held[key] = count - 1

@@ -21,6 +21,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from mope.errors import MopeError
+from mope.errors import MopeError, is_disk_full, short_repr
 
 DEFAULT_METRICS = ("cr", "igd", "hv", "eum", "optimal_share", "timeout_share", "path_error", "overestimation",
                    "win_share", "out_share")
@@ -140,8 +141,30 @@ def aggregate(values: Sequence[float], n_boot: int = 10_000, seed: int = 0) -> M
 # finding and grouping runs
 # ------------------------------------------------------------------------------------------------------------
 def _read_rows(path: Path) -> list[dict[str, float]]:
-    with open(path) as f:
-        return [{k: float(v) if v not in ("", None) else math.nan for k, v in row.items()} for row in csv.DictReader(f)]
+    """The rows of a numeric CSV file as floats (an empty cell is NaN).
+
+    Raises:
+        ReportError: naming the file, the line and the column of a cell that is not a number, or why the file
+            cannot be read.
+    """
+    try:
+        with open(path, newline="") as f:
+            reader = csv.DictReader(f)
+            return [{k: _number(v, path, reader.line_num, k) for k, v in row.items() if k is not None}
+                    for row in reader]
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        raise ReportError(f"'{path}' could not be read: {reason}") from None
+
+
+def _number(text: str | None, path: Path, line: int, column: str) -> float:
+    if text in ("", None):
+        return math.nan
+    try:
+        return float(text)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise ReportError(f"'{path}' line {line}, column {column}: {short_repr(text)} is not a number; fix or delete "
+                          "that row, or move the run out of the folder") from None
 
 
 def find_runs(runs_dir: str | Path) -> tuple[list[Run], list[str]]:
@@ -151,6 +174,8 @@ def find_runs(runs_dir: str | Path) -> tuple[list[Run], list[str]]:
     a last evaluation before ``total_steps``.
     """
     root = Path(runs_dir)
+    if root.exists() and not root.is_dir():
+        raise ReportError(f"runs folder '{root}' is a file; give the folder that holds the runs (or a sweep folder)")
     if not root.is_dir():
         raise ReportError(f"runs folder '{root}' does not exist")
     runs, notes = [], []
@@ -160,8 +185,12 @@ def find_runs(runs_dir: str | Path) -> tuple[list[Run], list[str]]:
             continue
         try:
             config = json.loads(cfg_path.read_text())
-        except json.JSONDecodeError as exc:
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
             raise ReportError(f"'{cfg_path}' is not valid JSON: {exc}") from None
+        except OSError as exc:
+            raise ReportError(f"'{cfg_path}' could not be read: {exc.strerror or exc}") from None
+        if not isinstance(config, dict):
+            raise ReportError(f"'{cfg_path}' does not hold a mope config (a JSON mapping)")
         rows = _read_rows(folder / "metrics.csv")
         rel = folder.relative_to(root)
         if not rows:
@@ -390,12 +419,11 @@ def _read_solutions(folder: Path) -> np.ndarray | None:
     path = folder / "solutions.csv"
     if not path.is_file():
         return None
-    with open(path) as f:
-        rows = list(csv.DictReader(f))
+    rows = _read_rows(path)
     if not rows:
         return None
-    cols = sorted((k for k in rows[0] if k.startswith("disc")), key=lambda k: int(k[4:]))
-    return np.array([[float(r[c]) for c in cols] for r in rows])
+    cols = sorted((k for k in rows[0] if k.startswith("disc") and k[4:].isdigit()), key=lambda k: int(k[4:]))
+    return np.array([[r[c] for c in cols] for r in rows])
 
 
 def _true_ccs(config: dict[str, Any]) -> np.ndarray | None:
@@ -480,6 +508,8 @@ def report(runs_dir: str | Path, out_dir: str | Path | None = None, metrics: Seq
         raise ReportError(f"n_boot={n_boot} is out of range: must be >= 1")
     root = Path(runs_dir)
     runs, notes = find_runs(root)
+    out = check_report_folder(Path(out_dir) if out_dir is not None else root / "report",
+                              "--out" if out_dir is not None else "the report folder")
     arm_fields = _label_arms(runs, root)
     groups, group_notes = group_runs(runs, _swept_fields(root), split_mismatched, arm_fields)
     notes += group_notes
@@ -497,8 +527,29 @@ def report(runs_dir: str | Path, out_dir: str | Path | None = None, metrics: Seq
     if len(steps) > 1:
         notes.append(f"runs end at different steps ({', '.join(map(str, sorted(steps)))})")
 
-    out = Path(out_dir) if out_dir is not None else root / "report"
-    return _write_report(root, out, runs, groups, shown, notes, n_boot, seed, plots)
+    try:
+        return _write_report(root, out, runs, groups, shown, notes, n_boot, seed, plots)
+    except OSError as exc:
+        what = "the disk is full" if is_disk_full(exc) else exc.strerror or str(exc)
+        raise ReportError(f"cannot write the report into '{out}': {what}") from None
+
+
+def check_report_folder(out: Path, what: str) -> Path:
+    """Make sure the report can be written into ``out`` before anything is computed: not a file, a folder that
+    exists or can be made, writable (probed with a temporary file, which is removed)."""
+    try:
+        if out.exists() and not out.is_dir():
+            raise ReportError(f"{what} '{out}' is a file; the report is a folder of files: give a folder")
+        base = next(p for p in (out, *out.parents) if p.exists())  # made later, when the report is written
+        if not base.is_dir():
+            raise ReportError(f"cannot write the report into '{out}': '{base}' is a file, not a folder")
+        probe = base / f".mope-write-test-{os.getpid()}"
+        probe.write_text("ok")
+        probe.unlink()
+    except OSError as exc:
+        raise ReportError(f"cannot write the report into '{out}': {exc.strerror or exc}; pass --out with a "
+                          "writable folder") from None
+    return out
 
 
 def _write_report(root: Path, out: Path, runs: Sequence[Run], groups: Sequence[Group], shown: list[str],

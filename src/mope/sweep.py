@@ -28,18 +28,26 @@ import itertools
 import json
 import math
 import re
+import sys
 import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mope.config import Config
-from mope.errors import ConfigError, suggest
+from mope.config import Config, _parse_problem, load_yaml, read_text_file
+from mope.errors import ConfigError, short_repr, suggest
 from mope.jobs import Job, JobError, check_backend, check_job_folders, run_jobs
 from mope.locks import FolderLock
 
 SPEC_KEYS = ("name", "base", "grid", "arms", "seeds", "seed")
+#: A sweep may hold this many trials at most (each is validated before any runs, and sweep.json lists them all).
+MAX_TRIALS = 100_000
+#: From this many trials on, the sweep says how many before it starts.
+LARGE_SWEEP = 1_000
+#: sweep.json is rewritten as trials finish, at most once per this many seconds (and at the end), so a sweep of
+#: many short trials does not spend its time rewriting a file that grows with the trial count.
+SWEEP_JSON_EVERY_S = 2.0
 
 
 class SweepError(ConfigError):
@@ -111,14 +119,14 @@ def _is_int(x: Any) -> bool:
 
 def _seed_list(value: Any, where: str) -> list[int]:
     if _is_int(value):
-        if value < 1:
-            raise SweepError(f"{where}={value} is out of range: give a count >= 1 or a list of seeds")
+        if value < 1 or value > MAX_TRIALS:
+            raise SweepError(f"{where}={value} is out of range: give a count in [1, {MAX_TRIALS}] or a list of seeds")
         return list(range(value))
     if isinstance(value, list) and value and all(_is_int(s) and s >= 0 for s in value):
         if len(set(value)) != len(value):
-            raise SweepError(f"{where}={value} lists a seed twice")
+            raise SweepError(f"{where}={short_repr(value)} lists a seed twice")
         return list(value)
-    raise SweepError(f"{where}={value!r} is not a seed count or a non-empty list of seeds >= 0")
+    raise SweepError(f"{where}={short_repr(value)} is not a seed count or a non-empty list of seeds >= 0")
 
 
 def parse_spec(data: Any, name: str = "sweep") -> SweepSpec:
@@ -164,15 +172,15 @@ def parse_spec(data: Any, name: str = "sweep") -> SweepSpec:
         if not values:
             raise SweepError(f"grid.{key} is an empty list; give at least one value")
         if key in list_fields and not all(isinstance(v, list) or v is None for v in values):
-            raise SweepError(f"grid.{key}={values!r} must be a list of lists, e.g. [[64, 64], [128, 128]]")
+            raise SweepError(f"grid.{key}={short_repr(values)} must be a list of lists, e.g. [[64, 64], [128, 128]]")
         if any(isinstance(v, (dict, set)) for v in values):
-            raise SweepError(f"grid.{key}={values!r} holds a mapping; give plain values")
+            raise SweepError(f"grid.{key}={short_repr(values)} holds a mapping; give plain values")
         if len({json.dumps(v, sort_keys=True) for v in values}) != len(values):
-            raise SweepError(f"grid.{key}={values!r} lists a value twice")
+            raise SweepError(f"grid.{key}={short_repr(values)} lists a value twice")
         grid[key] = values
     spec_name = data.get("name", name)
     if not isinstance(spec_name, str) or not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]*", spec_name):
-        raise SweepError(f"name={spec_name!r} must be a folder-safe name (letters, digits, '.', '_', '-')")
+        raise SweepError(f"name={short_repr(spec_name)} must be a folder-safe name (letters, digits, '.', '_', '-')")
     return SweepSpec(spec_name, dict(base), grid, seeds, _parse_arms(data.get("arms") or {}, axes_names, grid))
 
 
@@ -195,15 +203,12 @@ def _parse_arms(arms: Any, axes_names: list[str], grid: dict[str, list[Any]]) ->
 
 def load_spec(path: str | Path) -> SweepSpec:
     """Read and validate a YAML (or JSON) sweep spec; the default name is the file's stem."""
-    import yaml
-
     p = Path(path)
-    if not p.is_file():
-        raise SweepError(f"sweep spec '{p}' does not exist")
+    text = read_text_file(p, "sweep spec", SweepError)
     try:
-        data = yaml.safe_load(p.read_text())
-    except yaml.YAMLError as exc:
-        raise SweepError(f"sweep spec '{p}' could not be parsed: {str(exc).splitlines()[0]}") from None
+        data = load_yaml(text)
+    except Exception as exc:  # noqa: BLE001 - any parse failure (an alias bomb, a recursion) is the user's file
+        raise SweepError(f"sweep spec '{p}' could not be parsed: {_parse_problem(exc)}") from None
     try:
         return parse_spec(data, name=re.sub(r"[^A-Za-z0-9._-]", "_", p.stem) or "sweep")
     except SweepError as exc:
@@ -297,6 +302,10 @@ def expand(spec: SweepSpec) -> list[Trial]:
     Raises:
         SweepError: naming the trial whose config is invalid, or two trials that would share a folder.
     """
+    count = trial_count(spec)
+    if count > MAX_TRIALS:
+        raise SweepError(f"the sweep has {count} trials ({_count_terms(spec)}); a sweep may hold {MAX_TRIALS} at most: "
+                         "shorten the grid or the seeds, or split it into several sweeps")
     axes = list(spec.grid)
     points = [dict(zip(axes, combo, strict=True)) for combo in itertools.product(*(spec.grid[a] for a in axes))]
     arms: dict[str | None, dict[str, Any]] = dict(spec.arms) or {None: {}}
@@ -315,6 +324,16 @@ def expand(spec: SweepSpec) -> list[Trial]:
         seen[name] = params
         trials.append(Trial(name, params, config))
     return trials
+
+
+def trial_count(spec: SweepSpec) -> int:
+    """The number of trials: grid points x arms x seeds (computed without listing them)."""
+    return math.prod(len(v) for v in spec.grid.values()) * max(1, len(spec.arms)) * len(spec.seeds)
+
+
+def _count_terms(spec: SweepSpec) -> str:
+    terms = [f"{len(v)} {k}" for k, v in spec.grid.items()] + ([f"{len(spec.arms)} arms"] if spec.arms else [])
+    return " x ".join([*terms, f"{len(spec.seeds)} seeds"])
 
 
 def check_environments(trials: Iterable[Trial]) -> None:
@@ -366,6 +385,11 @@ def run_sweep(spec: SweepSpec | str | Path, out_dir: str | Path | None = None, b
         raise SweepError(str(exc)) from None
     if not isinstance(spec, SweepSpec):
         spec = load_spec(spec)
+    count = trial_count(spec)
+    if LARGE_SWEEP <= count <= MAX_TRIALS:
+        print(f"note: this sweep has {count} trials ({_count_terms(spec)}); each trains a run folder of its own, so "
+              "it will take a while; stop it at any time (Ctrl-C) and run the same command again to go on",
+              file=sys.stderr, flush=True)
     trials = expand(spec)
     check_environments(trials)
     out = Path(out_dir) if out_dir is not None else Path("runs") / spec.name
@@ -373,11 +397,12 @@ def run_sweep(spec: SweepSpec | str | Path, out_dir: str | Path | None = None, b
     with FolderLock(out, what="sweep folder"):
         records: dict[str, dict[str, Any]] = {}
         state: dict[str, Any] = {"backend": backend, "address": address, "started": time.time()}
-        _write_sweep_json(out, spec, trials, records, state)
+        writer = _SweepJson(out, spec, trials, records, state)
+        writer.write()
 
         def on_done(rec: dict[str, Any]) -> None:
             records[rec["name"]] = rec
-            _write_sweep_json(out, spec, trials, records, state)
+            writer.write(soon=True)
 
         t0 = time.perf_counter()
         jobs = [Job(t.name, "train", t.config.to_dict()) for t in trials]
@@ -387,7 +412,7 @@ def run_sweep(spec: SweepSpec | str | Path, out_dir: str | Path | None = None, b
             raise SweepError(str(exc)) from None
         finally:
             state["wall_s"] = time.perf_counter() - t0
-            _write_sweep_json(out, spec, trials, records, state)
+            writer.write()
     return [_result(out, t, records[t.name]) for t in trials]
 
 
@@ -396,14 +421,35 @@ def _result(out: Path, trial: Trial, rec: dict[str, Any]) -> TrialResult:
                        float(rec.get("wall_s", 0.0)), rec.get("error"))
 
 
+class _SweepJson:
+    """Writes ``sweep.json``; ``write(soon=True)`` (a trial finished) skips the write when the last one was less than
+    :data:`SWEEP_JSON_EVERY_S` ago (the next one, or the final one, has it), so writing stays a small share of the
+    sweep's time however many trials it has."""
+
+    def __init__(self, out: Path, spec: SweepSpec, trials: Sequence[Trial], records: dict[str, dict[str, Any]],
+                 state: dict[str, Any]) -> None:
+        self.out, self.spec, self.trials, self.records, self.state = out, spec, trials, records, state
+        self.arm_fields = _arm_fields(spec, trials)
+        self.last = -math.inf
+        self.cost = 0.0
+
+    def write(self, soon: bool = False) -> None:
+        now = time.monotonic()
+        if soon and now - self.last < max(SWEEP_JSON_EVERY_S, 20 * self.cost):
+            return
+        _write_sweep_json(self.out, self.spec, self.trials, self.records, self.state, self.arm_fields)
+        self.last = time.monotonic()
+        self.cost = self.last - now
+
+
 def _write_sweep_json(out: Path, spec: SweepSpec, trials: Sequence[Trial], records: dict[str, dict[str, Any]],
-                      state: dict[str, Any]) -> None:
+                      state: dict[str, Any], arm_fields: list[str] | None = None) -> None:
     rows = []
     for t in trials:
         rec = records.get(t.name, {})
         rows.append({"name": t.name, "params": t.params, "status": rec.get("status", "pending"),
                      "action": rec.get("action"), "wall_s": rec.get("wall_s"), "error": rec.get("error")})
-    arm_fields = _arm_fields(spec, trials)
+    arm_fields = _arm_fields(spec, trials) if arm_fields is None else arm_fields
     doc = {"spec": spec.to_dict(), "swept": [*spec.grid, *(["arm"] if spec.arms else []), "seed"],
            "arm_fields": arm_fields, **state, "trials": rows}
     tmp = out / "sweep.json.tmp"
@@ -441,9 +487,11 @@ def parse_set(items: Sequence[str] | None) -> dict[str, Any]:
         key, raw = item.split("=", 1)
         key = key.strip().replace("-", "_")
         try:
-            out[key] = yaml.safe_load(raw)
+            out[key] = load_yaml(raw)
         except yaml.YAMLError:
             out[key] = raw
+        except Exception as exc:  # noqa: BLE001 - an alias bomb or a recursive value
+            raise SweepError(f"--set {key}: {_parse_problem(exc)}") from None
     return out
 
 

@@ -8,6 +8,7 @@ callable ``obs -> action``.
 
 from __future__ import annotations
 
+import os
 import warnings
 from collections.abc import Callable
 from pathlib import Path
@@ -65,6 +66,8 @@ def record_video(policy: Any, env_id: str, pref: Any, path: str | Path, seed: in
     out = Path(path)
     if out.suffix.lower() != ".gif":
         raise VideoError(f"video path '{out}' must end in .gif")
+    _check_writable(out)
+    quiet_media()
     env = _rendering_env(env_id, env_kwargs)
     m = int(env.unwrapped.reward_space.shape[0])
     w = validate_preference(pref, m) if pref is not None else None
@@ -83,12 +86,38 @@ def record_video(policy: Any, env_id: str, pref: Any, path: str | Path, seed: in
         rate = fps or env.metadata.get("render_fps") or 10
     finally:
         env.close()
+    # encoded in memory, then written: a failed write cannot leave imageio's writer to fail again when collected
+    data = iio.imwrite("<bytes>", np.stack(frames), extension=".gif", duration=1000.0 / rate, loop=0)
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
-        iio.imwrite(out, np.stack(frames), duration=1000.0 / rate, loop=0)
+        out.write_bytes(data)
     except OSError as exc:
         raise VideoError(f"cannot write '{out}': {exc.strerror or exc}") from None
     return {"path": out, "frames": len(frames), "return": total, "outcome": info.get("outcome")}
+
+
+def quiet_media() -> None:
+    """Keep pygame (the rendering of several environments) from probing sound cards and displays: no ALSA or
+    ``XDG_RUNTIME_DIR`` lines, no greeting. Takes effect when pygame is first imported; values already set stay."""
+    for key, value in (("SDL_AUDIODRIVER", "dummy"), ("SDL_VIDEODRIVER", "dummy"),
+                       ("PYGAME_HIDE_SUPPORT_PROMPT", "1"), ("AUDIODEV", "null")):
+        os.environ.setdefault(key, value)
+
+
+def _check_writable(out: Path) -> None:
+    """Refuse, before the episode is played, a video path that is a folder or lies in a folder that cannot be made
+    or written."""
+    try:
+        if out.is_dir():
+            raise VideoError(f"video path '{out}' is a folder; give a file name ending in .gif")
+        base = next(p for p in (out.parent, *out.parent.parents) if p.exists())
+        if not base.is_dir():
+            raise VideoError(f"cannot write '{out}': '{base}' is a file, not a folder")
+        probe = base / f".mope-write-test-{os.getpid()}"
+        probe.write_text("ok")
+        probe.unlink()
+    except OSError as exc:
+        raise VideoError(f"cannot write '{out}': {exc.strerror or exc}") from None
 
 
 def _rendering_env(env_id: str, env_kwargs: dict[str, Any]) -> Any:

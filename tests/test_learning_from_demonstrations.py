@@ -112,7 +112,7 @@ def test_environment_defaults_fill_only_what_is_not_given() -> None:
 
     game = ENV_DEFAULTS[C.DISCRETE_ID]
     cfg = Config.for_algo("mope", env_id=C.DISCRETE_ID)
-    assert all(getattr(cfg, k) == v for k, v in game.items())
+    assert all(cfg.to_dict()[k] == v for k, v in game.items())
     assert Config.for_algo("mope", env_id=C.DISCRETE_ID, n_envs=2).n_envs == 2  # a given value wins
     paper = Config.from_dict({"preset": "paper", "env_id": C.DISCRETE_ID})
     assert paper.demos == "" and paper.n_envs == 1  # the paper's method alone

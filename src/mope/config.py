@@ -61,7 +61,8 @@ PRESETS: dict[str, dict[str, Any]] = {
 #: is the recipe its environment's study chose (docs/results/game-study for the robot game).
 ENV_DEFAULTS: dict[str, dict[str, Any]] = {
     "mope/RobotConfrontationDiscrete-v0": {"n_envs": 8, "buffer_size": 100_000, "demos": "scripted",
-                                           "demo_episodes": 50},
+                                           "demo_episodes": 50, "demo_batch_share": 0.25,
+                                           "eval_every": 20_000, "eval_prefs": 200},
 }
 
 #: Fields added after mope 0.2.0, with the values that reproduce the runs saved before them: a saved config (it has

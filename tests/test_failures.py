@@ -470,8 +470,15 @@ def test_warnings_are_not_printed_before_an_error_line(tmp_path: Path, capsys, m
         warnings.warn("a deprecation notice of some environment", UserWarning, stacklevel=1)
         raise RunFolderError("the real problem")
 
+    def to_stderr(message: object, category: type, filename: str, lineno: int, file: object = None,
+                  line: object = None) -> None:  # as an interpreter outside pytest shows a warning
+        sys.stderr.write(warnings.formatwarning(message, category, filename, lineno))  # type: ignore[arg-type]
+
     monkeypatch.setattr(experiments, "train_run", noisy)
-    code, _, err = cli(capsys, monkeypatch, "train", "--steps", "10", "--out", str(tmp_path / "r"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        warnings.showwarning = to_stderr
+        code, _, err = cli(capsys, monkeypatch, "train", "--steps", "10", "--out", str(tmp_path / "r"))
     assert code == 2
     one_error_line(err, "the real problem")
 

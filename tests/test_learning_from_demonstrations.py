@@ -119,3 +119,11 @@ def test_environment_defaults_fill_only_what_is_not_given() -> None:
     saved = Config.from_dict({**Config(env_id=C.DISCRETE_ID).to_dict()})  # a saved config is read as saved
     assert saved.demos == "" and saved.n_envs == 1
     assert Config.for_algo("mope").demos == "" and Config.for_algo("mope").n_envs == 1  # DST: unchanged
+
+
+def test_make_agent_with_an_env_id_brings_the_environment_defaults() -> None:
+    from mope import make_agent
+
+    agent = make_agent("mope", C.DISCRETE_ID, demo_episodes=1)
+    assert agent.config.n_envs == 8 and agent.config.demos == "scripted" and agent.buffer.reserved > 0
+    assert make_agent("eql", C.DISCRETE_ID, demos="", n_envs=2).config.n_envs == 2

@@ -440,5 +440,8 @@ def agent_class(algo: str) -> type[MoPE]:
 
 
 def make_agent(algo: str, env: gym.Env | str, **overrides: Any) -> MoPE:
-    """Build the agent of a named variant (``eql``, ``ee``, ``pe``, ``mope``): an :class:`EQL` for ``eql``."""
+    """Build the agent of a named variant (``eql``, ``ee``, ``pe``, ``mope``): an :class:`EQL` for ``eql``.
+    An env given by id brings its defaults (:data:`mope.config.ENV_DEFAULTS`) for the settings not given."""
+    if isinstance(env, str):
+        overrides = {"env_id": env, **overrides}
     return agent_class(algo)(env, Config.for_algo(algo, **overrides))

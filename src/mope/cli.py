@@ -103,13 +103,18 @@ def train(
         _fail(str(exc))
         return
     except KeyboardInterrupt:
-        if run_dir is not None and (Path(run_dir) / "checkpoints" / "resume.pt").is_file():
-            typer.echo(f"\ninterrupted; the training state is saved in {run_dir}/checkpoints/resume.pt\n"
-                       f"continue with: mope train --resume {run_dir}", err=True)
-        else:
-            typer.echo("\ninterrupted before the run's first checkpoint; nothing of it was kept", err=True)
-        raise typer.Exit(130) from None
+        _interrupted(run_dir)
     _print_final(cfg, result)
+
+
+def _interrupted(run_dir: Path | None) -> None:
+    """What a Ctrl-C of ``mope train`` leaves, and how to go on; exit code 130."""
+    if run_dir is not None and (Path(run_dir) / "checkpoints" / "resume.pt").is_file():
+        typer.echo(f"\ninterrupted; the training state is saved in {run_dir}/checkpoints/resume.pt\n"
+                   f"continue with: mope train --resume {run_dir}", err=True)
+    else:
+        typer.echo("\ninterrupted before the run's first checkpoint; nothing of it was kept", err=True)
+    raise typer.Exit(130) from None
 
 
 def _int_list(flag: str, text: str) -> list[int]:

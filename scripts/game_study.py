@@ -7,7 +7,7 @@ Usage::
 
 Each probe line (JSON): step, wall seconds of training so far, outcome rates at w_catch in {1, 0.9, 0.8, 0.7,
 0.5, 0.3, 0} over 100 common starts (greedy play), and the mean discounted EU over 21 preferences beside the
-reference policies' upper envelope (:mod:`mope.game_probe`).
+reference policies' upper envelope (:mod:`mope.game_probe`). The final weights go beside it (``.pt``).
 """
 
 from __future__ import annotations
@@ -54,3 +54,4 @@ with out.open("w") as f:
               + "/".join(f"{r[w]['win']:.2f}" for w in (1.0, 0.9, 0.8, 0.7))
               + " out@.5/.3/0 " + "/".join(f"{r[w]['out']:.2f}" for w in (0.5, 0.3, 0.0))
               + f" EU {res['eu']:.3f} (refs {res['eu_references']:.3f})", flush=True)
+agent.save(out.with_suffix(".pt"))  # the final weights, for later probes (not committed: a few MB)

@@ -29,7 +29,7 @@ def replayed(env_id: str, seed: int, actions: list[int]) -> gym.Env:
 def test_batched_collection_stores_what_stepping_each_env_alone_gives(env_id: str) -> None:
     """Each collection step of n envs stores, in its n slots, exactly the transitions that stepping a copy of each
     env by itself with the same action gives; finished episodes restart from a seeded reset."""
-    agent = MoPE(env_id, **SMALL, n_envs=3, epsilon_start=0.5)
+    agent = MoPE(env_id, **SMALL, n_envs=3, epsilon_start=0.5, demos="")  # the game's defaults add demos
     agent.collect_step()  # starts every env's episode
     resets = set(range(2, 2 + agent.episodes_started))  # seed + 0, 1, 2, ... in the order episodes start
     assert {ep.seed for ep in agent._episodes} <= resets and agent.episodes_started == 3 + agent.episodes

@@ -91,12 +91,7 @@ def run_status(out_dir: str | Path) -> str:
 def prepare_out_dir(out_dir: str | Path, overwrite: bool = False) -> Path:
     """Create the run folder; refuse to clobber finished results unless ``overwrite``."""
     out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise RunFolderError(f"output path '{out}' exists and is not a folder")
-    if (out / "metrics.csv").exists() and not overwrite:
-        hint = " or --resume to continue it" if run_status(out) == "resumable" else ""
-        raise RunFolderError(
-            f"output folder '{out}' already holds a run; choose another --out, pass --overwrite{hint}")
+    _refuse_clobber(out, overwrite)
     try:
         if overwrite:  # nothing of the old run may pass for the new one's (status, report, resume)
             for name in ("summary.json", "solutions.csv", "metrics.csv", TRAIN_STATS, "config.json", "error.txt"):
@@ -105,11 +100,9 @@ def prepare_out_dir(out_dir: str | Path, overwrite: bool = False) -> Path:
                 old.unlink()
             shutil.rmtree(out / "tb", ignore_errors=True)
         (out / "checkpoints").mkdir(parents=True, exist_ok=True)
-        probe = out / ".write_test"
-        probe.write_text("ok")
-        probe.unlink()
     except OSError as exc:
         raise RunFolderError(f"output folder '{out}' is not writable: {exc.strerror or exc}") from None
+    _probe_write(out)
     return out
 
 
@@ -330,12 +323,20 @@ def remove_stale_temporaries(out: Path) -> None:
 def check_out_dir(out: Path, overwrite: bool) -> None:
     """Refuse an output path that is a file, or a folder holding a run when ``overwrite`` is not given; touches
     nothing."""
+    _refuse_clobber(out, overwrite)
+    _probe_write(out)
+
+
+def _refuse_clobber(out: Path, overwrite: bool) -> None:
     if out.exists() and not out.is_dir():
         raise RunFolderError(f"output path '{out}' exists and is not a folder")
     if (out / "metrics.csv").exists() and not overwrite:
         hint = " or --resume to continue it" if run_status(out) == "resumable" else ""
         raise RunFolderError(
             f"output folder '{out}' already holds a run; choose another --out, pass --overwrite{hint}")
+
+
+def _probe_write(out: Path) -> None:
     probe = out / ".write_test"
     try:
         probe.write_text("ok")

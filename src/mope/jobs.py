@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from mope.errors import ConfigError, MopeError, suggest
+from mope.locks import pid_alive
 
 BACKENDS = ("local", "ray")
 RAY_MISSING = "the ray backend needs Ray: pip install 'mope[ray]'"
@@ -242,23 +243,13 @@ def _init_worker(parent_pid: int | None = None) -> None:
         threading.Thread(target=_watch_parent, args=(parent_pid,), name="mope-parent-watch", daemon=True).start()
 
 
-def _parent_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except OSError:  # exists, owned by someone else
-        return True
-    return True
-
-
 def _watch_parent(parent_pid: int, poll_s: float = 0.25) -> None:
     """In a pool worker: once the process that started the batch is gone (SIGKILLed: it could not stop its
     workers), interrupt the job as Ctrl-C would (a training saves its resumable state at the next step), then exit
     within :data:`ORPHAN_GRACE_S` seconds, instead of training the queued jobs with nobody to report to."""
     import signal
 
-    while _parent_alive(parent_pid):
+    while pid_alive(parent_pid):
         time.sleep(poll_s)
     _ORPHANED.set()
     with contextlib.suppress(OSError):

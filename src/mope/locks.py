@@ -29,7 +29,8 @@ class FolderLockedError(MopeError):
     """Another live process is writing the folder."""
 
 
-def _alive(pid: int) -> bool:
+def pid_alive(pid: int) -> bool:
+    """Whether a process with this id exists on this machine (owned by anyone)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -84,7 +85,7 @@ class FolderLock:
                 fd = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
             except FileExistsError:
                 holder = self._holder()
-                if holder and holder.get("host") == me["host"] and not _alive(int(holder.get("pid", -1))):
+                if holder and holder.get("host") == me["host"] and not pid_alive(int(holder.get("pid", -1))):
                     with contextlib.suppress(FileNotFoundError):  # stale: its process is gone
                         self.path.unlink()
                     continue

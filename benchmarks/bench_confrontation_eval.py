@@ -23,7 +23,7 @@ import numpy as np
 
 import mope
 import mope.envs.confrontation as conf
-from mope.baselines import play_episodes
+from mope.paper.ppo import play_episodes
 from mope.preferences import equally_spaced
 
 

@@ -123,7 +123,7 @@ class MopeRunner:
 
 def make_runner(method: str, seed: int, total_steps: int, overrides: dict[str, Any] | None = None) -> Any:
     if method == "envelope":
-        from mope.peers import EnvelopeRunner
+        from mope.paper.envelope import EnvelopeRunner
 
         return EnvelopeRunner(ENV_ID, seed, GAMMA, overrides)
     return MopeRunner(method, seed, total_steps, overrides)
@@ -378,8 +378,8 @@ def _ratio(a: float | None, b: float | None) -> str:
 
 
 def _mean_ci(values: list[float]) -> str:
-    """``mean [lo, hi]``: the percentile bootstrap 95% CI of the mean (mope.report's)."""
-    from mope.report import aggregate
+    """``mean [lo, hi]``: the percentile bootstrap 95% CI of the mean (mope.experiments.report's)."""
+    from mope.experiments.stats import aggregate
 
     v = [x for x in values if x is not None and not math.isnan(x)]
     if not v:
@@ -573,7 +573,7 @@ def main() -> None:
     def overrides(method: str) -> dict[str, Any] | None:
         if method != "envelope":
             return None
-        from mope.peers import ENVELOPE_EXAMPLE
+        from mope.paper.envelope import ENVELOPE_EXAMPLE
 
         base = ENVELOPE_EXAMPLE if args.envelope_settings == "example" else {}
         return {**base, **(args.envelope_kwargs or {})}

@@ -14,11 +14,11 @@ from __future__ import annotations
 import json
 import sys
 
-from mope.agent import MoPE
+from mope.agent.agent import MoPE
 from mope.envs import confrontation as C
 from mope.envs import make_env
 from mope.envs.confrontation_batch import play_reference
-from mope.evaluation import Evaluator
+from mope.evaluation.evaluator import Evaluator
 
 overrides = json.loads(sys.argv[1]) if len(sys.argv) > 1 else {}
 agent = MoPE(C.DISCRETE_ID, seed=0, total_steps=5000, **overrides)

@@ -28,11 +28,11 @@ import time
 import numpy as np
 import torch
 
-from mope import targets
-from mope.agent import MoPE
+from mope.agent import targets
+from mope.agent.agent import MoPE
+from mope.agent.networks import ConvexQNetwork
 from mope.config import Config
 from mope.envs import make_env
-from mope.networks import ConvexQNetwork
 
 
 def double_components(v_online, v_target, prefs):
@@ -178,7 +178,7 @@ if "loop-target" in sys.argv[3:]:
     assert overrides.get("n_step", 1) == 1, "loop-target patches the one-step target only"
     targets.one_step_target = loop_one_step
 if "eval-target" in sys.argv[3:]:  # evaluate the greedy policy of the Polyak-averaged (target) network
-    import mope.evaluation as _ev
+    import mope.evaluation.evaluator as _ev
 
     _evaluate = _ev.Evaluator.evaluate
 

@@ -7,7 +7,7 @@ Usage::
 
 Each probe line (JSON): step, wall seconds of training so far, outcome rates at w_catch in {1, 0.9, 0.8, 0.7,
 0.5, 0.3, 0} over 100 common starts (greedy play), and the mean discounted EU over 21 preferences beside the
-reference policies' upper envelope (:mod:`mope.game_probe`). The final weights go beside it (``.pt``).
+reference policies' upper envelope (:mod:`mope.evaluation.game_probe`). The final weights go beside it (``.pt``).
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import torch
 from mope import make_agent
 from mope.config import parse_overrides
 from mope.envs import confrontation as C
-from mope.game_probe import probe
+from mope.evaluation.game_probe import probe
 
 parser = argparse.ArgumentParser()
 parser.add_argument("--steps", type=int, default=30_000)

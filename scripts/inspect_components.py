@@ -13,9 +13,9 @@ from collections import Counter
 import numpy as np
 import torch
 
-from mope.agent import MoPE
-from mope.diagnose import tabular_model
+from mope.agent.agent import MoPE
 from mope.envs import make_env
+from mope.evaluation.diagnose import tabular_model
 
 
 def option(flag: str, default: str) -> str:

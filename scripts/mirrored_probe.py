@@ -18,8 +18,8 @@ import time
 import numpy as np
 import torch
 
-from mope import losses
-from mope.agent import MoPE
+from mope.agent import losses
+from mope.agent.agent import MoPE
 from mope.config import Config
 from mope.envs import make_env
 

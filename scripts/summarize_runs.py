@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mope.experiments import read_metrics
+from mope.experiments.runs import read_metrics
 
 KEYS = ("cr", "eum", "eum_optimal", "optimal_share", "timeout_share", "hv")
 

@@ -3,7 +3,7 @@
 Each network is fitted for ``--steps`` Adam steps (learning rate decayed from ``--lr`` to 1 % of it on a cosine, so
 the final weights are settled) on batches of ``--rows`` (state, action, preference) samples: the
 state uniform over the reachable ones, the preference uniform on a fine grid, the target the exact vector
-``Q*(s, a, w)`` (value iteration, :mod:`mope.diagnose`). Then the ground-truth diagnostic measures its greedy
+``Q*(s, a, w)`` (value iteration, :mod:`mope.evaluation.diagnose`). Then the ground-truth diagnostic measures its greedy
 policy. A network that cannot reach a small path error *with the answer given* cannot reach it by TD learning
 either: this separates the function class from the learning dynamics (docs/design.md, "The learner").
 
@@ -11,7 +11,7 @@ either: this separates the function class from the learning dynamics (docs/desig
 
 Heads: ``conditioned`` (the paper's: the preference is an input, one vector per action), fitted with the vector
 loss ``||Q - Q*||^2``; ``convex`` (mope's: C vectors per action from the state alone, the preferred one is
-Q(s, a, w)), fitted with that loss plus the component loss of :func:`mope.losses.component_loss`.
+Q(s, a, w)), fitted with that loss plus the component loss of :func:`mope.agent.losses.component_loss`.
 """
 
 from __future__ import annotations
@@ -24,9 +24,9 @@ import mo_gymnasium as mo_gym
 import numpy as np
 import torch
 
-from mope.diagnose import agent_q, diagnose_q, tabular_model, value_iteration
-from mope.losses import component_loss
-from mope.networks import ConvexQNetwork, QNetwork
+from mope.agent.losses import component_loss
+from mope.agent.networks import ConvexQNetwork, QNetwork
+from mope.evaluation.diagnose import agent_q, diagnose_q, tabular_model, value_iteration
 from mope.preferences import equally_spaced
 
 #: (label, head, observation encoding, hidden layers)

@@ -8,7 +8,7 @@ import torch
 
 import mope
 from mope import EQL, CheckpointError, Config, MoPE, MopeError, PreferenceError, make_env, targets
-from mope.base import Episode
+from mope.agent.base import Episode
 
 SMALL = {"hidden_sizes": (32, 32), "n_omega": 8, "batch_size": 16, "learning_starts": 32, "buffer_size": 2000}
 

@@ -1,4 +1,4 @@
-"""Tests of mope.checkpoint: round trips, atomic writes and refusing unsafe or broken files."""
+"""Tests of mope.agent.checkpoint: round trips, atomic writes and refusing unsafe or broken files."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import torch
 
-import mope.checkpoint as checkpoint
-from mope.checkpoint import FORMAT_VERSION, load_checkpoint, mope_version, save_checkpoint
+import mope.agent.checkpoint as checkpoint
+from mope.agent.checkpoint import FORMAT_VERSION, load_checkpoint, mope_version, save_checkpoint
 from mope.config import Config
 from mope.errors import CheckpointError, MopeError
 

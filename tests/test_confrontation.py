@@ -278,8 +278,8 @@ def test_balance_pursuer_beats_blue_and_blue_beats_random() -> None:
 
 
 def test_mope_agent_trains_and_evaluates_on_the_discrete_id() -> None:
-    from mope.agent import MoPE
-    from mope.evaluation import Evaluator
+    from mope.agent.agent import MoPE
+    from mope.evaluation.evaluator import Evaluator
 
     agent = MoPE(C.DISCRETE_ID, seed=0, n_omega=4, learning_starts=16, batch_size=8, total_steps=40, demos="")
     agent.train(40)
@@ -302,9 +302,9 @@ def test_a_short_training_beats_random_red() -> None:
     across machines). Seed 0 alone had loss share 0.48 on the AMD EPYC development machine and 0.78 on an Intel
     Xeon one, where seeds 1 and 2 had 0.60 and 0.52 (2026-12-04).
     """
-    from mope.agent import MoPE
+    from mope.agent.agent import MoPE
     from mope.envs.confrontation_batch import play_reference
-    from mope.evaluation import Evaluator
+    from mope.evaluation.evaluator import Evaluator
 
     _, disc, outcomes = play_reference("random", list(range(200)))
     random_loss = outcomes.count("blue_win") / len(outcomes)

@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 
 import mope.envs.confrontation as conf
-from mope.envs import DiscreteActions
-from mope.envs.batched import make_batched
+from mope.envs import DiscreteActions, make_batched
 from mope.envs.confrontation_batch import ConfrontationBatch
 
 
@@ -60,7 +59,7 @@ def test_the_evaluation_uses_the_batched_game() -> None:
 
 
 def test_play_episodes_on_the_batch_equals_stepping_each_game() -> None:
-    from mope.baselines import play_episodes
+    from mope.paper.ppo import play_episodes
 
     seeds = [10_000 + j for _ in range(6) for j in range(2)]
     policy = lambda obs, idx: (idx * 5 + (obs[:, 0] * 10).astype(int)) % 15  # noqa: E731 - depends on the state

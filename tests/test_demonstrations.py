@@ -1,4 +1,4 @@
-"""Tests of mope.demonstrations: collecting, merging, saving and loading demonstrations, and their errors."""
+"""Tests of mope.agent.demonstrations: collecting, merging, saving and loading demonstrations, and their errors."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from mope.demonstrations import (
+from mope.agent.demonstrations import (
     KEYS,
     SCRIPTED_POLICIES,
     Demonstrations,

@@ -1,5 +1,5 @@
-"""The ground-truth diagnostic (mope.diagnose): exact values on hand-made models, DST against its known front,
-the seabed variant, and the diagnostic's numbers for hand-made agents."""
+"""The ground-truth diagnostic (mope.evaluation.diagnose): exact values on hand-made models, DST against its known
+front, the seabed variant, and the diagnostic's numbers for hand-made agents."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import mope  # noqa: F401 - registers mope's environments
-from mope.diagnose import TabularModel, diagnose, diagnose_q, tabular_model, value_iteration
 from mope.errors import EnvironmentError_
+from mope.evaluation.diagnose import TabularModel, diagnose, diagnose_q, tabular_model, value_iteration
 
 STAY, SMALL_T, GO = 0, 1, 2
 PREFS = np.array([[0.0, 1.0], [0.5, 0.5], [1.0, 0.0]])
@@ -52,7 +52,7 @@ class FixedQ:
 def test_diagnostic_hand_values() -> None:
     model = chain()
     truth = value_iteration(model, PREFS, gamma=0.5)
-    from mope.diagnose import agent_q
+    from mope.evaluation.diagnose import agent_q
 
     d = diagnose_q(agent_q(FixedQ(), model, PREFS), model, truth)
     # on-path pairs: w=(0,1) -> {0} (the small treasure ends it), wrong; the others -> {0, 1}, right

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mope.diversity import distinct_paths, state_preference_mi
+from mope.evaluation.diversity import distinct_paths, state_preference_mi
 
 
 def paths_to_array(paths: list[list[tuple[int, int]]]) -> tuple[np.ndarray, np.ndarray]:

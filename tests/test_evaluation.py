@@ -1,4 +1,5 @@
-"""Tests of mope.evaluation and the batched Deep-Sea-Treasure: exact dynamics, and the metrics of known policies."""
+"""Tests of mope.evaluation.evaluator and the batched Deep-Sea-Treasure: exact dynamics, and the metrics of known
+policies."""
 
 from __future__ import annotations
 
@@ -7,10 +8,10 @@ import warnings
 import numpy as np
 import pytest
 
-import mope.evaluation as evaluation
-from mope.envs import make_env
-from mope.envs.batched import DeepSeaTreasureBatch, EnvList, make_batched
-from mope.evaluation import Evaluator, solutions
+import mope.evaluation.evaluator as evaluation
+from mope.envs import make_batched, make_env
+from mope.envs.batched import DeepSeaTreasureBatch, EnvList
+from mope.evaluation.evaluator import Evaluator, solutions
 from mope.preferences import sample_simplex
 
 # Deep-Sea-Treasure convex map: (row, col) of each treasure, in the order of pareto_front().

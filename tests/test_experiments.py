@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from mope.errors import CheckpointError
-from mope.experiments import RunFolderError, prepare_out_dir, resolve_checkpoint
+from mope.experiments.runs import RunFolderError, prepare_out_dir, resolve_checkpoint
 
 
 def test_output_path_that_is_a_file_is_refused(tmp_path):

@@ -26,7 +26,7 @@ import torch
 
 from mope.config import Config
 from mope.errors import ConfigError, MopeError, one_line
-from mope.experiments import RunFolderError, train_run
+from mope.experiments.runs import RunFolderError, train_run
 
 TINY = {"env_id": "deep-sea-treasure-v0", "algo": "eql", "total_steps": 60, "eval_every": 30, "eval_prefs": 10,
         "checkpoint_every": 30, "hidden_sizes": [8], "buffer_size": 200, "batch_size": 8, "learning_starts": 10,
@@ -112,7 +112,7 @@ def test_failed_overwrite_leaves_the_old_run_byte_for_byte(case: str, old_run: P
 
 
 def test_overwrite_failing_before_its_first_checkpoint_restores_the_old_run(old_run: Path, monkeypatch) -> None:
-    import mope.experiments as experiments
+    import mope.experiments.runs as experiments
 
     before = tree_hash(old_run)
 
@@ -139,7 +139,7 @@ def test_overwrite_deletes_the_old_run_once_the_new_one_has_a_checkpoint(old_run
 
 
 def test_a_killed_overwrite_is_undone_on_the_next_start(old_run: Path) -> None:
-    from mope.experiments import _Aside, recover_aside
+    from mope.experiments.runs import _Aside, recover_aside
 
     before = tree_hash(old_run)
     _Aside.set_aside(old_run)  # what a SIGKILL between setting aside and the first checkpoint leaves
@@ -177,7 +177,7 @@ def test_yaml_alias_bomb_config_is_refused_at_once(tmp_path: Path, capsys, monke
 
 
 def test_yaml_alias_bomb_sweep_spec_and_set_are_refused_at_once(tmp_path: Path) -> None:
-    from mope.sweep import SweepError, load_spec, parse_set
+    from mope.experiments.sweep import SweepError, load_spec, parse_set
 
     path = tmp_path / "bomb.yaml"
     path.write_text("grid:\n" + "\n".join("  " + line for line in BOMB.splitlines()))
@@ -232,7 +232,7 @@ def test_seed_beyond_64_bits_is_one_line_and_leaves_no_folder(tmp_path: Path, ca
 def test_huge_buffer_is_refused_with_its_memory_before_allocating(tmp_path: Path, monkeypatch) -> None:
     import numpy as np
 
-    import mope.experiments as experiments
+    import mope.experiments.runs as experiments
 
     allocated: list[int] = []
     real_zeros = np.zeros
@@ -254,7 +254,7 @@ def test_a_path_longer_than_the_file_system_allows_is_one_line(tmp_path: Path, c
 def _fill_disk_after(monkeypatch: pytest.MonkeyPatch, saves: int) -> None:
     """From the ``saves``-th checkpoint write on, fail as torch does on a full disk: an ENOSPC, then the zip writer's
     RuntimeError on top of it."""
-    import mope.checkpoint as checkpoint
+    import mope.agent.checkpoint as checkpoint
 
     real_save = torch.save
     count = [0]
@@ -311,7 +311,7 @@ def test_a_really_full_disk_during_training_and_resume(tmp_path: Path) -> None:
 # --------------------------------------------------------------------------------------------- eval
 def test_eval_checks_where_results_go_before_evaluating(finished_run: Path, tmp_path: Path, capsys,
                                                         monkeypatch) -> None:
-    import mope.evaluation as evaluation
+    import mope.evaluation.evaluator as evaluation
 
     def no_evaluation(*args: object, **kwargs: object) -> None:
         raise AssertionError("the evaluation ran before the output was checked")
@@ -331,8 +331,8 @@ def test_eval_checks_where_results_go_before_evaluating(finished_run: Path, tmp_
 
 
 def test_eval_preference_count_is_bounded(finished_run: Path, capsys, monkeypatch) -> None:
-    import mope.evaluation as evaluation
-    from mope.experiments import evaluate_checkpoint
+    import mope.evaluation.evaluator as evaluation
+    from mope.experiments.runs import evaluate_checkpoint
 
     t0 = time.perf_counter()
     code, _, err = cli(capsys, monkeypatch, "eval", str(finished_run), "--prefs", "10000000")
@@ -428,8 +428,8 @@ def test_random_bytes_are_not_called_a_dangerous_pickle(tmp_path: Path, capsys, 
 
 
 def test_stale_checkpoint_temporaries_are_removed_and_stats_keep_their_types(tmp_path: Path, monkeypatch) -> None:
-    import mope.experiments as experiments
-    from mope.runner import Callback
+    import mope.experiments.runs as experiments
+    from mope.agent.runner import Callback
 
     ref = tmp_path / "ref"
     train_run(tiny(total_steps=90, log_every=10), ref, progress=False)
@@ -464,7 +464,7 @@ def test_stale_checkpoint_temporaries_are_removed_and_stats_keep_their_types(tmp
 
 # --------------------------------------------------------------------------------------------- warnings
 def test_warnings_are_not_printed_before_an_error_line(tmp_path: Path, capsys, monkeypatch) -> None:
-    import mope.experiments as experiments
+    import mope.experiments.runs as experiments
 
     def noisy(*args: object, **kwargs: object) -> None:
         warnings.warn("a deprecation notice of some environment", UserWarning, stacklevel=1)
@@ -494,7 +494,7 @@ def test_act_video_is_quiet_and_a_failed_write_is_one_line(finished_run: Path, t
     res = mope_cli("act", str(finished_run), "--pref", "0.5,0.5", "--video", str(blocker / "v.gif"), env=env)
     assert res.returncode == 2
     one_error_line(res.stderr, "v.gif")
-    from mope.video import quiet_media
+    from mope.evaluation.video import quiet_media
 
     monkeypatch = pytest.MonkeyPatch()
     monkeypatch.delenv("SDL_AUDIODRIVER", raising=False)
@@ -552,8 +552,8 @@ def test_sigkilled_sweep_leaves_no_process_behind(tmp_path: Path) -> None:
 
 def test_huge_sweeps_are_announced_or_refused_and_sweep_json_is_not_rewritten_per_trial(tmp_path: Path, capsys,
                                                                                          monkeypatch) -> None:
-    import mope.sweep as sweep_mod
-    from mope.sweep import SweepError, load_spec, run_sweep
+    import mope.experiments.sweep as sweep_mod
+    from mope.experiments.sweep import SweepError, load_spec, run_sweep
 
     spec = tmp_path / "huge.yaml"
     grid = {"target_update_freq": list(range(1, 1001)), "epsilon_decay_steps": list(range(1, 1001))}
@@ -584,7 +584,7 @@ def test_huge_sweeps_are_announced_or_refused_and_sweep_json_is_not_rewritten_pe
 
 
 def test_a_finished_trial_loses_a_stale_error_file(tmp_path: Path, finished_run: Path) -> None:
-    from mope.jobs import Job, run_jobs
+    from mope.experiments.jobs import Job, run_jobs
 
     out = tmp_path / "batch"
     shutil.copytree(finished_run, out / "trial")

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from mope import ConfigError, MoPE
-from mope.demonstrations import collect_demonstrations, save_demonstrations
+from mope.agent.demonstrations import collect_demonstrations, save_demonstrations
 from mope.envs import confrontation as C
 from mope.envs import make_env
 from mope.errors import DemonstrationError
@@ -94,7 +94,7 @@ def test_scripted_demonstrations_of_the_game_cover_both_ends_of_the_front() -> N
 def treasure_demonstrations(per_treasure: int = 4, gamma: float = 0.99):
     """Deep-Sea-Treasure demonstrations of every treasure's shortest path (right along the surface to its column,
     then down), each labelled with preferences from the band where that treasure is the optimum."""
-    from mope.demonstrations import Demonstrations
+    from mope.agent.demonstrations import Demonstrations
 
     env = make_env("deep-sea-treasure-v0")
     sea = np.asarray(env.unwrapped.sea_map)
@@ -119,7 +119,7 @@ def test_a_short_training_with_demonstrations_beats_one_without(tmp_path) -> Non
     lift the share of preferences at their optimum and the CR over the same training without them. Measured on
     seeds 0-2 (Intel Xeon): optimal share 0.74 / 0.76 / 0.66 against 0.59 / 0.53 / 0.54, CR 0.95 / 0.84 / 0.90
     against 0.78 / 0.71 / 0.78."""
-    from mope.evaluation import Evaluator
+    from mope.evaluation.evaluator import Evaluator
 
     path = save_demonstrations(tmp_path / "treasures.npz", treasure_demonstrations())
     ev = Evaluator.from_config(make_env("deep-sea-treasure-v0"), MoPE("deep-sea-treasure-v0").config)

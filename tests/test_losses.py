@@ -1,4 +1,4 @@
-"""Tests of mope.losses on tiny cases worked out by hand (eq. 4-7 of the paper)."""
+"""Tests of mope.agent.losses on tiny cases worked out by hand (eq. 4-7 of the paper)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from mope.losses import (
+from mope.agent.losses import (
     clip_targets,
     component_loss,
     envelope_set,
@@ -130,7 +130,7 @@ def test_envelope_target_with_different_k_and_n() -> None:
 def test_envelope_target_with_real_network_shapes() -> None:
     import gymnasium as gym
 
-    from mope.networks import QNetwork
+    from mope.agent.networks import QNetwork
 
     torch.manual_seed(0)
     net = QNetwork(gym.spaces.Box(0.0, 1.0, (3,)), n_actions=4, n_objectives=2, hidden=(8,))

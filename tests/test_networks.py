@@ -1,4 +1,4 @@
-"""Tests of mope.networks: observation encoding, the multi-head Q-network and the preference discriminator."""
+"""Tests of mope.agent.networks: observation encoding, the multi-head Q-network and the preference discriminator."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import pytest
 import torch
 from torch import nn
 
+from mope.agent.networks import ConvexQNetwork, Discriminator, ObsEncoder, QNetwork, mlp
 from mope.errors import EnvironmentError_
-from mope.networks import ConvexQNetwork, Discriminator, ObsEncoder, QNetwork, mlp
 
 DST_SPACE = gym.spaces.Box(low=0, high=11, shape=(2,), dtype=np.int32)
 
@@ -194,7 +194,7 @@ def test_discriminator_learns_to_separate_two_groups() -> None:
 
 
 def test_onehot_encoding_of_an_integer_box() -> None:
-    from mope.networks import ObsEncoder
+    from mope.agent.networks import ObsEncoder
 
     space = gym.spaces.Box(low=0, high=3, shape=(2,), dtype=np.int32)
     enc = ObsEncoder(space, "onehot")
@@ -205,8 +205,8 @@ def test_onehot_encoding_of_an_integer_box() -> None:
 
 
 def test_onehot_encoding_refuses_a_float_box() -> None:
+    from mope.agent.networks import ObsEncoder
     from mope.errors import EnvironmentError_
-    from mope.networks import ObsEncoder
 
     with pytest.raises(EnvironmentError_, match="integer Box"):
         ObsEncoder(gym.spaces.Box(low=0.0, high=1.0, shape=(2,)), "onehot")
@@ -266,7 +266,7 @@ def test_encoder_state_holds_only_what_earlier_checkpoints_hold() -> None:
 def test_convex_double_q_values_equal_the_general_path():
     """The fused n-step path (online picks the action, target reads its own preferred component) gives the same
     values and greedy actions as both networks' forward_prefs followed by eq. 4's target without an envelope."""
-    from mope.losses import envelope_target
+    from mope.agent.losses import envelope_target
 
     gen = torch.Generator().manual_seed(0)
     x, a, c, m, n = 7, 4, 5, 3, 6

@@ -28,6 +28,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import chisquare
 
+from mope.agent.replay import SumTree
 from mope.metrics import (
     DEFAULT_ATOL,
     convex_coverage_set,
@@ -37,7 +38,6 @@ from mope.metrics import (
     pareto_front,
 )
 from mope.preferences import sample_neighbours, sample_simplex
-from mope.replay import SumTree
 
 PROPS = settings(max_examples=60, deadline=None)
 SEEDS = st.integers(0, 2**32 - 1)

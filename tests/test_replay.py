@@ -1,11 +1,11 @@
-"""Tests of mope.replay: the vectorised sum tree and the (prioritized) replay buffer."""
+"""Tests of mope.agent.replay: the vectorised sum tree and the (prioritized) replay buffer."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from mope.replay import ReplayBuffer, SumTree
+from mope.agent.replay import ReplayBuffer, SumTree
 
 
 # ------------------------------------------------------------------------------------------- SumTree

@@ -7,7 +7,7 @@ import json
 import pytest
 
 from mope.errors import ConfigError
-from mope.reproduce import dst_jobs, reproduce_dst
+from mope.paper.dst import dst_jobs, reproduce_dst
 
 TINY = {"eval_prefs": 200, "n_omega": 8, "learning_starts": 50, "hidden_sizes": [32, 32], "batch_size": 16}
 

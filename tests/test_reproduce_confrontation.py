@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 import mope.envs.confrontation as C
-from mope.baselines import Episodes, play_episodes, train_ppo
 from mope.errors import ConfigError, MopeError
-from mope.reproduce_confrontation import reproduce_confrontation, speed_class, strategy_diversity, summarize
-from mope.video import VideoError, record_video
+from mope.evaluation.video import VideoError, record_video
+from mope.paper.confrontation import reproduce_confrontation, speed_class, strategy_diversity, summarize
+from mope.paper.ppo import Episodes, play_episodes, train_ppo
 
 
 def make() -> C.RobotConfrontationDiscreteEnv:
@@ -78,7 +78,7 @@ def test_ppo_trains_on_actions_rescaled_to_the_unit_box_with_no_checker_warning(
 
     from stable_baselines3.common.env_checker import check_env
 
-    from mope.baselines import make_scalarized_env, rescale_to_box
+    from mope.paper.ppo import make_scalarized_env, rescale_to_box
 
     env = make_scalarized_env(C.CONTINUOUS_ID, np.array([0.5, 0.5]))
     assert env.action_space.low.tolist() == [-1, -1] and env.action_space.high.tolist() == [1, 1]
@@ -140,7 +140,7 @@ def test_reproduce_rejects_bad_arguments(tmp_path) -> None:
 
 
 def test_confrontation_seeds_take_a_count_a_range_or_a_list() -> None:
-    from mope.reproduce_confrontation import check_confrontation_args, confrontation_jobs
+    from mope.paper.confrontation import check_confrontation_args, confrontation_jobs
 
     for given, want in ((2, [0, 1]), ("4-5", [4, 5]), ("7,2", [7, 2])):
         seeds, ppo_steps = check_confrontation_args(given, 1000, 2, 3, 2, 1, "each")
@@ -173,7 +173,7 @@ def test_reproduce_confrontation_tiny(tmp_path) -> None:
 def test_a_saved_ppo_policy_of_another_budget_is_not_reused(tmp_path):
     import json
 
-    from mope.jobs import run_job
+    from mope.experiments.jobs import run_job
 
     meta = {"pref": [1.0, 0.0], "steps": 64, "seed": 0, "env_id": "mope/RobotConfrontation-v0"}
     folder = tmp_path / "ppo-s0-pref00"

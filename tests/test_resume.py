@@ -19,7 +19,7 @@ import pytest
 from mope import MoPE
 from mope.config import Config
 from mope.errors import MopeError
-from mope.experiments import RunFolderError, run_status, train_run
+from mope.experiments.runs import RunFolderError, run_status, train_run
 
 SMALL = {"total_steps": 300, "eval_every": 100, "eval_prefs": 50, "n_omega": 8, "hidden_sizes": [32, 32],
          "learning_starts": 50, "checkpoint_every": 100, "seed": 3}
@@ -160,7 +160,7 @@ def test_resume_cli_errors(tmp_path):
 def test_divergence_names_step_and_quantity_and_keeps_the_last_good_checkpoint(tmp_path, monkeypatch):
     import torch
 
-    import mope.agent as agent_module
+    import mope.agent.agent as agent_module
 
     cfg = Config.for_algo("eql", **{**SMALL, "total_steps": 400, "checkpoint_every": 100})
     original = agent_module.MoPE.update
@@ -184,7 +184,7 @@ def test_divergence_names_step_and_quantity_and_keeps_the_last_good_checkpoint(t
 
 
 def test_overwrite_leaves_nothing_of_the_old_run_and_stale_resume_state_is_refused(tmp_path):
-    from mope.experiments import prepare_out_dir
+    from mope.experiments.runs import prepare_out_dir
 
     cfg = Config.for_algo("eql", **SMALL)
     out = tmp_path / "run"

@@ -17,10 +17,10 @@ import pytest
 
 import mope
 from mope import EQL, CheckpointError, Config, ConfigError, MoPE
+from mope.agent.runner import Callback, IntervalStats, train
 from mope.cli import expand_set_args
-from mope.experiments import train_run
-from mope.locks import LOCK_NAME, FolderLock, FolderLockedError
-from mope.runner import Callback, IntervalStats, train
+from mope.experiments.locks import LOCK_NAME, FolderLock, FolderLockedError
+from mope.experiments.runs import train_run
 
 SMALL = {"hidden_sizes": (16, 16), "n_omega": 4, "batch_size": 8, "learning_starts": 20, "buffer_size": 500,
          "disc_hidden": (8,)}
@@ -219,8 +219,8 @@ def test_a_checkpoint_of_the_mirrored_map_loads_without_env(tmp_path: Path) -> N
 def test_an_interrupted_reproduction_resumes_through_the_job_runner(tmp_path: Path, monkeypatch) -> None:
     import signal
 
-    import mope.experiments as experiments
-    from mope.reproduce import dst_jobs, reproduce_dst, run_name
+    import mope.experiments.runs as experiments
+    from mope.paper.dst import dst_jobs, reproduce_dst, run_name
 
     tiny = {**SMALL, "eval_prefs": 50, "checkpoint_every": 100}
     out = tmp_path / "repro"

@@ -11,12 +11,12 @@ from pathlib import Path
 import pytest
 import yaml
 
-from mope.agent import MoPE
+from mope.agent.agent import MoPE
 from mope.config import Config
 from mope.errors import MopeError
-from mope.experiments import train_run
-from mope.jobs import JobError, run_job_remote, unpack_job
-from mope.sweep import (
+from mope.experiments.jobs import JobError, run_job_remote, unpack_job
+from mope.experiments.runs import train_run
+from mope.experiments.sweep import (
     SweepError,
     apply_overrides,
     expand,
@@ -178,8 +178,8 @@ def test_rerun_skips_finished_resumes_interrupted_and_records_failures(local_swe
     # seed 0: finished earlier -> skipped
     shutil.copytree(local_sweep / trials[0].name, tmp_path / trials[0].name)
     # seed 1: interrupted at step 150 by SIGINT (as Ctrl-C would) -> resumed from checkpoints/resume.pt
-    import mope.experiments as experiments
-    from mope.runner import Callback
+    import mope.experiments.runs as experiments
+    from mope.agent.runner import Callback
 
     original_train = experiments.train
 

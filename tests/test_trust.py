@@ -62,9 +62,9 @@ import torch
 from typer.testing import CliRunner
 
 import mope
-import mope.checkpoint as checkpoint
+import mope.agent.checkpoint as checkpoint
 from mope import EQL, MoPE
-from mope.checkpoint import FORMAT_VERSION, check_compatible, load_checkpoint, mope_version
+from mope.agent.checkpoint import FORMAT_VERSION, check_compatible, load_checkpoint, mope_version
 from mope.cli import app
 from mope.config import Config
 from mope.envs import DiscreteActions, make_env
@@ -223,7 +223,7 @@ def test_discrete_actions_wrapper_makes_it_usable() -> None:
 
 
 def test_api_missing_output_folder_is_created(tmp_path: Path) -> None:
-    from mope.experiments import prepare_out_dir
+    from mope.experiments.runs import prepare_out_dir
 
     out = prepare_out_dir(tmp_path / "new" / "run")
     assert (out / "checkpoints").is_dir()
@@ -239,7 +239,7 @@ def test_api_unwritable_output(tmp_path: Path) -> None:
 
 @pytest.mark.skipif(IS_ROOT, reason="root can write into a read-only folder, so chmod cannot make one unwritable")
 def test_api_read_only_output_folder(tmp_path: Path) -> None:
-    from mope.experiments import RunFolderError, prepare_out_dir
+    from mope.experiments.runs import RunFolderError, prepare_out_dir
 
     ro = tmp_path / "ro"
     ro.mkdir()

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from mope import Config, MoPE
+from mope.agent.replay import ReplayBuffer
 from mope.envs import confrontation as C
 from mope.envs import make_env
-from mope.replay import ReplayBuffer
 
 SMALL = {"hidden_sizes": (32, 32), "n_omega": 8, "batch_size": 16, "learning_starts": 40, "buffer_size": 4000,
          "seed": 2}

@@ -26,8 +26,9 @@ def _fail(message: str) -> None:
 
 
 def quiet_media() -> None:
-    """Keep pygame from probing sound cards and displays (:func:`mope.video.quiet_media`) before it is imported."""
-    from mope.video import quiet_media as quiet
+    """Keep pygame from probing sound cards and displays (:func:`mope.evaluation.video.quiet_media`)
+    before it is imported."""
+    from mope.evaluation.video import quiet_media as quiet
 
     quiet()
 
@@ -81,7 +82,7 @@ def train(
     progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
 ) -> None:
     """Train an agent, evaluating CR/HV/EUM as it goes; writes a run folder."""
-    from mope.experiments import train_run
+    from mope.experiments.runs import train_run
 
     run_dir = resume
     try:
@@ -145,7 +146,7 @@ def _resume(run_dir: Path, given: list[str], device: str | None, progress: bool,
     """``mope train --resume RUN_DIR``: continue from resume.pt, or start over a run that has none yet; with
     ``--overwrite``, start the run over with its saved config (its old results stay until the new run's first
     checkpoint)."""
-    from mope.experiments import RunFolderError, run_status, train_run
+    from mope.experiments.runs import RunFolderError, run_status, train_run
 
     if given:
         raise ConfigError(f"--resume continues a run with its saved config; drop {', '.join(given)}")
@@ -197,8 +198,8 @@ def eval_(
     device: Annotated[str | None, typer.Option(help="cpu, cuda or auto (default: the run's).")] = None,
 ) -> None:
     """Evaluate a trained agent: CR, HV, EUM and more; writes the solution set as CSV."""
-    from mope.evaluation import MAX_EVAL_PREFS
-    from mope.experiments import evaluate_checkpoint, resolve_checkpoint
+    from mope.evaluation.evaluator import MAX_EVAL_PREFS
+    from mope.experiments.runs import evaluate_checkpoint, resolve_checkpoint
 
     try:
         ckpt = resolve_checkpoint(run_or_checkpoint)
@@ -224,9 +225,9 @@ def act(
 ) -> None:
     """Play one greedy episode under a preference and print its return vector (optionally record a GIF)."""
     quiet_media()
-    from mope.experiments import load_agent, play
+    from mope.evaluation.video import record_video
+    from mope.experiments.runs import load_agent, play
     from mope.preferences import validate_preference
-    from mope.video import record_video
 
     try:
         if video is not None:
@@ -255,8 +256,8 @@ def diagnose(
     device: Annotated[str | None, typer.Option(help="cpu, cuda or auto (default: the run's).")] = None,
 ) -> None:
     """Measure a trained agent against the exact Q* (environments with known dynamics: Deep-Sea-Treasure)."""
-    from mope.diagnose import diagnose as run_diagnosis
-    from mope.experiments import load_agent, resolve_checkpoint
+    from mope.evaluation.diagnose import diagnose as run_diagnosis
+    from mope.experiments.runs import load_agent, resolve_checkpoint
 
     try:
         if prefs < 1:
@@ -296,7 +297,7 @@ def reproduce_dst_cmd(
     progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
 ) -> None:
     """Fig. 2 and Fig. 3 of the paper on Deep-Sea-Treasure: four variants x seeds, figures and a table."""
-    from mope.reproduce import reproduce_dst
+    from mope.paper.dst import reproduce_dst
 
     try:
         res = reproduce_dst(out, seeds=seeds, steps=steps, eval_every=eval_every,
@@ -332,7 +333,7 @@ def reproduce_confrontation_cmd(
     progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
 ) -> None:
     """Fig. 5 and Fig. 6 of the paper on the robot confrontation game: PPO x K, EQL and MoPE; figures and a table."""
-    from mope.reproduce_confrontation import reproduce_confrontation
+    from mope.paper.confrontation import reproduce_confrontation
 
     try:
         res = reproduce_confrontation(out, seeds=seeds, steps=steps, ppo_prefs=ppo_prefs, eval_prefs=eval_prefs,
@@ -362,7 +363,7 @@ def sweep(
     progress: Annotated[bool, typer.Option(help="Show the live summary.")] = True,
 ) -> None:
     """Run a grid of trainings; re-running skips finished trials and resumes interrupted ones."""
-    from mope.sweep import sweep_command
+    from mope.experiments.sweep import sweep_command
 
     try:
         results = sweep_command(spec, out, backend, address, workers, set_, seeds, progress)
@@ -396,7 +397,7 @@ def benchmark(
     progress: Annotated[bool, typer.Option(help="Show the live line.")] = True,
 ) -> None:
     """mope's variants beside morl-baselines' Envelope on several environments: one table and figure per env."""
-    from mope.benchmark import run_benchmark
+    from mope.paper.benchmark import run_benchmark
 
     def split(text: str | None) -> list[str] | None:
         return [x.strip() for x in text.split(",") if x.strip()] if text else None
@@ -422,7 +423,7 @@ def report(
         help="Group runs that differ beyond the swept fields separately.")] = False,
 ) -> None:
     """Aggregate runs across seeds: table (mean, std, bootstrap 95% CI, IQM), curves and fronts."""
-    from mope.report import report_command
+    from mope.experiments.report import report_command
 
     try:
         report_command(runs_dir, out, split_mismatched)

@@ -144,8 +144,8 @@ def _need(obj: Any, ok: bool, name: str, allowed: str) -> None:
 class RunSettings:
     """How a run is executed and recorded: device, evaluation, checkpoints, logs. Nothing here changes learning.
 
-    The agent reads only ``device`` (where its networks live); the runner (:mod:`mope.runner`,
-    :func:`mope.experiments.train_run`) reads the rest.
+    The agent reads only ``device`` (where its networks live); the runner (:mod:`mope.agent.runner`,
+    :func:`mope.experiments.runs.train_run`) reads the rest.
     """
 
     device: str = "cpu"
@@ -205,7 +205,7 @@ class Config:
     #: Rewards times this constant in the targets (all objectives alike: no greedy action changes); 1: off.
     reward_scale: float = 1.0
     #: Q-network head: "conditioned" (the paper: omega is an input, one vector per action and objective) or
-    #: "convex" (C return vectors per action; Q(s, a, w) is the one w prefers: mope.networks.ConvexQNetwork).
+    #: "convex" (C return vectors per action; Q(s, a, w) is the one w prefers: mope.agent.networks.ConvexQNetwork).
     q_head: str = "convex"
     #: C, return vectors per action of the convex head.
     n_components: int = 12
@@ -234,11 +234,11 @@ class Config:
     #: Polyak averaging of the target network at every step with this weight; None: the hard copy above.
     target_tau: float | None = 0.005
     #: Weight of the episode's greedy-tail return in the target row of its own preference (0: off;
-    #: mope.losses.greedy_tail_returns; docs/results/return-mix); returns older than return_window are not used.
+    #: mope.agent.losses.greedy_tail_returns; docs/results/return-mix); returns older than return_window are not used.
     return_mix: float = 0.5
     return_window: int = 2_000
     #: Stored steps of reward in every target row, each row cut at its own first non-greedy action
-    #: (mope.losses.watkins_n_step_targets; docs/results/n-step). 1: the one-step target of eq. 4.
+    #: (mope.agent.losses.watkins_n_step_targets; docs/results/n-step). 1: the one-step target of eq. 4.
     n_step: int = 1
     #: Weight of the auxiliary loss: L = L^A + lb_weight * L^B. The paper uses 1.
     lb_weight: float = 1.0
@@ -284,9 +284,9 @@ class Config:
     #: The constant in p(omega) ~ (N_i + c)^(-1/2); the paper uses 0.01.
     pe_count_offset: float = 0.01
 
-    # --- demonstrations (DQfD, Hester et al. 2018; mope.demonstrations) ----------------------------------------
+    # --- demonstrations (DQfD, Hester et al. 2018; mope.agent.demonstrations) ----------------------------------------
     #: "" (none), "scripted" (the env's scripted policies, each at the preferences it is good at), or an .npz file
-    #: of episodes (mope.demonstrations.save_demonstrations). Kept in replay for good.
+    #: of episodes (mope.agent.demonstrations.save_demonstrations). Kept in replay for good.
     demos: str = ""
     #: Episodes collected from each scripted policy (a file is used whole).
     demo_episodes: int = 100

@@ -21,7 +21,7 @@ One update (:meth:`MoPE.update`), top to bottom:
 Housekeeping (:meth:`MoPE.end_step`): the target network (Polyak averaging with ``target_tau``, by default, or a
 hard copy every ``target_update_freq`` steps) and the learning-rate schedule.
 The loop that strings these together, with evaluation, progress, checkpoints and logs as callbacks, is
-:func:`mope.runner.train`.
+:func:`mope.agent.runner.train`.
 """
 
 from __future__ import annotations
@@ -35,16 +35,21 @@ import numpy as np
 import torch
 from torch import nn
 
-from mope import losses, targets
-from mope.agent_state import resolve_device
-from mope.base import BaseAgent, Episode, linear_schedule
+from mope.agent import losses, targets
+from mope.agent.agent_state import resolve_device
+from mope.agent.base import BaseAgent, Episode, linear_schedule
+from mope.agent.demonstrations import (
+    Demonstrations,
+    collect_demonstrations,
+    default_demonstrations,
+    load_demonstrations,
+)
+from mope.agent.networks import ConvexQNetwork, Discriminator, make_q_network
+from mope.agent.replay import Batch, ReplayBuffer
 from mope.config import Config, check_algo
-from mope.demonstrations import Demonstrations, collect_demonstrations, default_demonstrations, load_demonstrations
 from mope.envs import check_env_fits, make_env
 from mope.errors import ConfigError, MopeError
-from mope.networks import ConvexQNetwork, Discriminator, make_q_network
 from mope.preferences import PreferenceSampler, sample_neighbours, sample_simplex
-from mope.replay import Batch, ReplayBuffer
 
 __all__ = ["EQL", "MoPE", "TrainingDivergedError", "agent_class", "linear_schedule", "make_agent", "resolve_device",
            "return_bounds"]
@@ -123,7 +128,7 @@ def demonstrations_for(cfg: Config, env: gym.Env) -> Demonstrations | None:
     sources = default_demonstrations(cfg.env_id)
     if not sources:
         raise ConfigError(f"demos='scripted': environment '{cfg.env_id}' has no scripted policy; give a file of "
-                          "episodes instead (demos=PATH.npz, see mope.demonstrations.save_demonstrations)")
+                          "episodes instead (demos=PATH.npz, see mope.agent.demonstrations.save_demonstrations)")
     demo_env = make_env(cfg.env_id, cfg.max_episode_steps)
     return Demonstrations.concatenate([
         collect_demonstrations(demo_env, name, cfg.demo_episodes, pref_range,
@@ -205,6 +210,11 @@ class MoPE(BaseAgent):
     variant: str = "mope"
     #: Whether a config must name exactly that variant (MoPE runs any of the four; EQL only ``eql``).
     strict_variant: bool = False
+
+    @classmethod
+    def class_for(cls, algo: str) -> type[MoPE]:
+        """The class that :meth:`load` builds for a checkpoint of ``algo`` (:func:`agent_class`)."""
+        return agent_class(algo)
 
     def __init__(self, env: gym.Env | str, config: Config | None = None, **overrides: Any) -> None:
         self.config = cfg = resolve_config(type(self), env, config, overrides)
@@ -380,7 +390,7 @@ class MoPE(BaseAgent):
     @torch.no_grad()
     def _envelope_target(self, batch: Batch, w: torch.Tensor, acting: torch.Tensor,
                          demo: torch.Tensor | None = None) -> torch.Tensor:
-        """Target y of eq. 4 (:mod:`mope.targets`: one step, or ``n_step`` with each row's Watkins cut, none on
+        """Target y of eq. 4 (:mod:`mope.agent.targets`: one step, or ``n_step`` with each row's Watkins cut, none on
         demonstrations), clamped to the return bounds and, with ``return_mix``, blended with the behaviour's
         greedy-tail returns."""
         c = self.config

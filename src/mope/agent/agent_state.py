@@ -1,6 +1,6 @@
 """Saving and loading an agent: its weights, its whole training state, and the environment it was trained on.
 
-:class:`AgentState` is the base class of :class:`mope.agent.MoPE`: everything about checkpoints lives here, so
+:class:`AgentState` is the base class of :class:`mope.agent.agent.MoPE`: everything about checkpoints lives here, so
 the agent module holds only acting and learning.
 
 A checkpoint stores the config, the networks and optimizers, the preference counts, the step counters and RNG
@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +22,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from mope.checkpoint import check_compatible, load_checkpoint, save_checkpoint
+from mope.agent.checkpoint import check_compatible, load_checkpoint, save_checkpoint
 from mope.config import Config
 from mope.errors import CheckpointError, EnvironmentError_, MopeError
 
@@ -106,10 +107,36 @@ def rebuild_env(saved: dict[str, Any], config: Config, path: str | Path) -> gym.
             from None
 
 
+@dataclass
+class Episode:
+    """The episode in progress in one training env.
+
+    Attributes:
+        seed: The seed of its reset (resuming replays ``actions`` from it).
+        pref: Its preference omega_b, drawn by the preference sampler at the reset.
+        obs: The env's current observation.
+        actions: The actions taken so far.
+        slots: With ``return_mix``, the buffer slots of its transitions ...
+        greedy: ... and which of its actions were greedy.
+    """
+
+    seed: int
+    pref: np.ndarray
+    obs: Any
+    actions: list[int] = field(default_factory=list)
+    slots: list[int] = field(default_factory=list)
+    greedy: list[bool] = field(default_factory=list)
+
+
 class AgentState:
     """Checkpoint support for an agent with ``q_net``, ``target_net``, ``optimizer`` and the rest of MoPE's state."""
 
     config: Config
+
+    @classmethod
+    def class_for(cls, algo: str) -> type[Any]:
+        """The class that :meth:`load` builds for a checkpoint of ``algo``; the agent overrides it."""
+        return cls
 
     def state_dict(self, include_buffer: bool = False) -> dict[str, Any]:
         """Everything needed to act (and, with ``include_buffer``, to resume training)."""
@@ -153,15 +180,13 @@ class AgentState:
     def load(cls, path: str | Path, env: gym.Env | None = None, **overrides: Any) -> Any:
         """Load a checkpoint written by :meth:`save`.
 
-        The saved config decides the variant: ``MoPE.load`` returns an :class:`~mope.agent.EQL` for an EQL
-        checkpoint and a :class:`~mope.agent.MoPE` otherwise; ``EQL.load`` refuses a checkpoint of another
+        The saved config decides the variant: ``MoPE.load`` returns an :class:`~mope.agent.agent.EQL` for an EQL
+        checkpoint and a :class:`~mope.agent.agent.MoPE` otherwise; ``EQL.load`` refuses a checkpoint of another
         variant. ``env`` defaults to the environment the checkpoint was trained on, rebuilt from its spec.
 
         Raises:
             CheckpointError: for a missing, corrupt, unsafe or incompatible checkpoint.
         """
-        from mope.agent import agent_class
-
         data = load_checkpoint(path)
         try:
             config = Config.from_dict(data["config"])
@@ -173,7 +198,7 @@ class AgentState:
         if getattr(cls, "strict_variant", False) and config.algo != variant:
             raise CheckpointError(f"checkpoint '{path}' holds a '{config.algo}' agent, not '{variant}'; "
                                   f"load it with MoPE.load")
-        agent_cls = agent_class(config.algo)
+        agent_cls = cls.class_for(config.algo)
         if env is None and "env_id" not in overrides:
             env = rebuild_env(data.get("env") or {}, config, path)  # type: ignore[assignment]
         agent = agent_cls(env if env is not None else config.env_id, config)
@@ -225,8 +250,6 @@ class AgentState:
                          greedy: list[bool]) -> Any:
         """Rebuild the episode in progress in env ``i`` by replaying its actions from its seeded reset (no RNG
         draws)."""
-        from mope.base import Episode
-
         a: Any = self
         obs, _ = a.envs[i].reset(seed=seed)
         for act in actions:

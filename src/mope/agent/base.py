@@ -1,52 +1,30 @@
 """Acting and collecting experience: the half of an agent that does not learn (Stable-Baselines3's policy side).
 
-:class:`BaseAgent` is the base class of :class:`mope.agent.MoPE`. It acts (greedy or epsilon-greedy, batched),
+:class:`BaseAgent` is the base class of :class:`mope.agent.agent.MoPE`. It acts (greedy or epsilon-greedy, batched),
 steps the training environment and stores transitions (:meth:`BaseAgent.collect_step`), and hands the training
-loop to :mod:`mope.runner`. The subclass builds the networks, the replay buffer and the preference sampler, and
+loop to :mod:`mope.agent.runner`. The subclass builds the networks, the replay buffer and the preference sampler, and
 learns.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 import torch
 
-from mope import losses
-from mope.agent_state import AgentState
+from mope.agent import losses
+from mope.agent.agent_state import AgentState, Episode
+from mope.agent.replay import ReplayBuffer
 from mope.errors import MopeError
 from mope.preferences import validate_preference
-from mope.replay import ReplayBuffer
 
 
 def linear_schedule(start: float, end: float, duration: int, step: int) -> float:
     """Linear interpolation from ``start`` to ``end`` over ``duration`` steps, then constant."""
     frac = min(1.0, step / max(1, duration))
     return start + frac * (end - start)
-
-
-@dataclass
-class Episode:
-    """The episode in progress in one training env.
-
-    Attributes:
-        seed: The seed of its reset (resuming replays ``actions`` from it).
-        pref: Its preference omega_b, drawn by the preference sampler at the reset.
-        obs: The env's current observation.
-        actions: The actions taken so far.
-        slots: With ``return_mix``, the buffer slots of its transitions ...
-        greedy: ... and which of its actions were greedy.
-    """
-
-    seed: int
-    pref: np.ndarray
-    obs: Any
-    actions: list[int] = field(default_factory=list)
-    slots: list[int] = field(default_factory=list)
-    greedy: list[bool] = field(default_factory=list)
 
 
 class BaseAgent(AgentState):
@@ -145,7 +123,7 @@ class BaseAgent(AgentState):
         terminated = np.array([bool(s[2]) for s in steps])
         done = terminated | np.array([bool(s[3]) for s in steps])
         slots = self.buffer.add_batch(obs, prefs, actions, rewards, next_obs, terminated, done)
-        if self.config.return_mix:  # the trace of each episode's greedy tail (mope.losses.greedy_tail_returns)
+        if self.config.return_mix:  # the trace of each episode's greedy tail (mope.agent.losses.greedy_tail_returns)
             greedy = self._greedy_trace(obs, prefs, actions)
         self.global_step += len(eps)
         for i, ep in enumerate(eps):
@@ -172,7 +150,8 @@ class BaseAgent(AgentState):
     @torch.no_grad()
     def store_episode_returns(self, episode: Episode, terminated: bool) -> None:
         """At an episode's end: the greedy-tail return of each of its transitions under the episode's preference
-        (:func:`mope.losses.greedy_tail_returns`, values of the target network, learner's units), into the buffer."""
+        (:func:`mope.agent.losses.greedy_tail_returns`, values of the target network, learner's units), into the
+        buffer."""
         slots = np.asarray(episode.slots, dtype=np.int64)
         if len(slots) == 0:
             return
@@ -202,7 +181,7 @@ class BaseAgent(AgentState):
             total_timesteps: Steps to run now (training continues from ``global_step``).
             eval_env: If given, evaluate with the paper's protocol every ``eval_every`` steps and at the end.
             eval_every: Default ``config.run.eval_every``.
-            callback: A :class:`mope.runner.Callback` (or a list of them) called at every step.
+            callback: A :class:`mope.agent.runner.Callback` (or a list of them) called at every step.
             progress: Show a progress bar with the latest CR.
 
         The episode in progress carries over from one call to the next, so ``train(500)`` twice equals
@@ -211,6 +190,6 @@ class BaseAgent(AgentState):
         Returns:
             The evaluation records (step, wall seconds and every metric of :class:`~mope.evaluation.Evaluator`).
         """
-        from mope.runner import train_with_evaluation
+        from mope.agent.runner import train_with_evaluation
 
         return train_with_evaluation(self, total_timesteps, eval_env, eval_every, callback, progress)

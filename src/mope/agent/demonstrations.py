@@ -1,7 +1,7 @@
 """Demonstrations: episodes of a scripted controller (or any policy, or a file) for learning from demonstrations.
 
 DQfD (Hester et al. 2018) keeps demonstration transitions in the replay buffer and adds a large-margin loss
-(:func:`mope.losses.large_margin_loss`) that makes the greedy policy imitate the demonstrator on its states.
+(:func:`mope.agent.losses.large_margin_loss`) that makes the greedy policy imitate the demonstrator on its states.
 This module provides the data side:
 
 * :class:`Demonstrations` -- arrays of transitions, whole episodes in order, each episode labelled with the
@@ -28,7 +28,7 @@ random    --             2.0 %     82.0 %     16.0 %   0 %        (-10.99, -0.01
 (*) circle is not among ``demos="scripted"``'s sources (pursuit dominates it); the ranges of the other two
 stop 0.05 short of where their discounted utilities cross (w_catch = 0.39). 200 games each, reset seeds 0..199, the
 registered 150-step limit; circle also saw blue leave once. Measured
-with ``.venv/bin/python -c "from mope.demonstrations import _measure; _measure(200)"`` (40 s on one core).
+with ``.venv/bin/python -c "from mope.agent.demonstrations import _measure; _measure(200)"`` (40 s on one core).
 For comparison, issue 31 measured the continuous pursuer at 61 % wins and pure pursuit at (-11.20, 7.11) on
 500 start states. Pursuit dominates circling on both objectives; circling is there for states and actions
 that pursuit does not visit.

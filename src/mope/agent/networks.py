@@ -188,7 +188,7 @@ class ConvexQNetwork(nn.Module):
     continuation changes, and smooths them; here they are exact, and only the vectors have to be learned: one
     constant target per component. With C at least the number of convex-coverage-set points reachable from
     (s, a), the envelope max of eq. 4 over *every* preference is the max over components. The component of a
-    target is trained by :func:`mope.losses.component_loss` as well as through ``Q``.
+    target is trained by :func:`mope.agent.losses.component_loss` as well as through ``Q``.
 
     With ``n_critics`` H > 1 the network has H such heads on one trunk, each trained on the same targets, and
     ``Q(s, a, omega)`` is the head with the lowest ``omega^T Q_h(s, a, omega)`` (:meth:`pessimistic`): Maxmin
@@ -250,7 +250,7 @@ class ConvexQNetwork(nn.Module):
         ``v_online``, ``v_target`` ``(X, A, C, m)``, ``prefs`` ``(X, N, m)``. The online network picks the action
         (its best component over all actions, ``argmax_{a, c} w^T v_online``); the target network's value of that
         action is its own component that ``w`` prefers. The same numbers as :meth:`forward_prefs` of both
-        networks followed by :func:`mope.losses.envelope_target` with ``envelope=False``, at a fraction of the
+        networks followed by :func:`mope.agent.losses.envelope_target` with ``envelope=False``, at a fraction of the
         cost: the target's components are scored for the chosen action only.
 
         Returns:

@@ -16,8 +16,8 @@ import gymnasium as gym
 from mope.errors import MopeError
 
 if TYPE_CHECKING:
-    from mope.agent import MoPE
-    from mope.evaluation import Evaluator
+    from mope.agent.agent import MoPE
+    from mope.evaluation.evaluator import Evaluator
 
 
 class Callback:
@@ -63,15 +63,15 @@ def as_callback(callback: Callback | Sequence[Callback] | None) -> Callback:
         return callback
     if isinstance(callback, (list, tuple)):
         return CallbackList(callback)
-    raise MopeError(f"callback {callback!r} is not a mope.runner.Callback (or a list of them)")
+    raise MopeError(f"callback {callback!r} is not a mope.agent.runner.Callback (or a list of them)")
 
 
 def train(agent: MoPE, total_steps: int, callback: Callback | Sequence[Callback] | None = None) -> bool:
     """Run ``total_steps`` environment steps of ``agent``, continuing from ``agent.global_step``.
 
-    One step: :meth:`~mope.agent.MoPE.collect_step` (act, step the ``n_envs`` environments, store their
-    transitions), :meth:`~mope.agent.MoPE.learn_step` (the updates, every ``train_freq``-th step),
-    :meth:`~mope.agent.MoPE.end_step` (target network, learning rate), then ``callback.on_step``. With
+    One step: :meth:`~mope.agent.agent.MoPE.collect_step` (act, step the ``n_envs`` environments, store their
+    transitions), :meth:`~mope.agent.agent.MoPE.learn_step` (the updates, every ``train_freq``-th step),
+    :meth:`~mope.agent.agent.MoPE.end_step` (target network, learning rate), then ``callback.on_step``. With
     ``n_envs`` > 1 a step advances ``global_step`` by ``n_envs``, so a call may end up to ``n_envs - 1`` env
     steps past ``total_steps``. The training wall time (evaluations included) accumulates in ``agent.wall_s``.
 
@@ -199,7 +199,7 @@ class IntervalStats(Callback):
     """Average the update statistics over every ``every`` steps and hand each average to ``sink``.
 
     Each row has ``step``, ``updates`` (how many updates it averages), ``epsilon`` and the mean of every
-    statistic :meth:`~mope.agent.MoPE.update` returns (losses, |TD|, mean and max Q, MI bonus).
+    statistic :meth:`~mope.agent.agent.MoPE.update` returns (losses, |TD|, mean and max Q, MI bonus).
     """
 
     def __init__(self, every: int, sink: Callable[[dict[str, float]], None]) -> None:
@@ -224,8 +224,8 @@ class IntervalStats(Callback):
 def train_with_evaluation(agent: MoPE, total_timesteps: int | None = None, eval_env: gym.Env | None = None,
                           eval_every: int | None = None, callback: Any = None, progress: bool = False
                           ) -> list[dict[str, float]]:
-    """What :meth:`mope.agent.MoPE.train` does: :func:`train` with evaluation and a progress bar as callbacks."""
-    from mope.evaluation import Evaluator
+    """What :meth:`mope.agent.agent.MoPE.train` does: :func:`train` with evaluation and a progress bar as callbacks."""
+    from mope.evaluation.evaluator import Evaluator
 
     c = agent.config
     total = c.total_steps if total_timesteps is None else int(total_timesteps)

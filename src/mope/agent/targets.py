@@ -1,7 +1,7 @@
 """The target y of eq. 4 for a sampled batch: one step, or n stored steps with each row's own Watkins cut.
 
 The agent calls :func:`one_step_target` or :func:`n_step_target` (``Config.n_step``); both run the networks
-once over the states they need and leave the arithmetic to :mod:`mope.losses`.
+once over the states they need and leave the arithmetic to :mod:`mope.agent.losses`.
 """
 
 from __future__ import annotations
@@ -10,10 +10,10 @@ import numpy as np
 import torch
 from torch import nn
 
-from mope import losses
+from mope.agent import losses
+from mope.agent.networks import ConvexQNetwork
+from mope.agent.replay import ReplayBuffer
 from mope.config import Config
-from mope.networks import ConvexQNetwork
-from mope.replay import ReplayBuffer
 
 
 def _t(x: np.ndarray, device: torch.device, dtype: torch.dtype = torch.float32) -> torch.Tensor:
@@ -42,7 +42,7 @@ def n_step_target(q_net: nn.Module, target_net: nn.Module, buffer: ReplayBuffer,
                   w: torch.Tensor, acting: torch.Tensor, cfg: Config, n: int,
                   uncut: torch.Tensor | None = None) -> torch.Tensor:
     """Eq. 4's target over ``n`` stored steps, each row cut where its preference's greedy action differs from the
-    stored one (:func:`mope.losses.watkins_n_step_targets`). One pass of each network over the ``B x n`` next
+    stored one (:func:`mope.agent.losses.watkins_n_step_targets`). One pass of each network over the ``B x n`` next
     states gives the envelope value after every step and the rows' greedy actions. ``n = 1`` is
     :func:`one_step_target`. Transitions flagged in ``uncut`` (``(B,)``, demonstrations: DQfD's n-step return)
     are cut only at their episode's end."""

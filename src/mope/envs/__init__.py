@@ -9,12 +9,16 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import gymnasium as gym
 import mo_gymnasium as mo_gym
 import numpy as np
 
 from mope.errors import EnvironmentError_, suggest
+
+if TYPE_CHECKING:
+    from mope.envs.batched import BatchedEnv
 
 # MO-Gymnasium's own spaces trip this Gymnasium warning on every make(); it says nothing about the user's input.
 warnings.filterwarnings("ignore", message=".*precision lowered by casting.*")
@@ -162,6 +166,19 @@ def default_ref_point(env: gym.Env, env_id: str, gamma: float, horizon: int | No
         return None
     disc = (1 - gamma**horizon) / (1 - gamma) if gamma < 1 else float(horizon)
     return np.minimum(low, 0.0) * disc - 1.0
+
+
+def make_batched(env: gym.Env, n: int, seed: int = 0) -> BatchedEnv:
+    """The fastest exact batched version of ``env`` available: the vectorised Deep-Sea-Treasure or game, else
+    ``n`` copies stepped one by one."""
+    from mope.envs.batched import DeepSeaTreasureBatch, EnvList
+    from mope.envs.confrontation_batch import ConfrontationBatch
+
+    if DeepSeaTreasureBatch.supports(env):
+        return DeepSeaTreasureBatch(env, n)
+    if ConfrontationBatch.supports(env):
+        return ConfrontationBatch(env, n, seed)
+    return EnvList(env, n, seed)
 
 
 from mope.envs import confrontation  # noqa: E402, F401 - registers mope/RobotConfrontation*-v0

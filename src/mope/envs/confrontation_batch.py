@@ -16,7 +16,8 @@ import math
 import gymnasium as gym
 import numpy as np
 
-from mope.envs import confrontation as conf
+import mope.envs.confrontation as conf
+from mope.envs.batched import BENIGN_WRAPPERS
 
 
 def blue_actions(red: np.ndarray, blue: np.ndarray, env: conf.RobotConfrontationEnv) -> np.ndarray:
@@ -108,8 +109,6 @@ class ConfrontationBatch:
     @staticmethod
     def supports(env: gym.Env) -> bool:
         """True for the Robot Confrontation Game, bare or behind ``DiscreteActions`` / benign wrappers."""
-        from mope.envs.batched import BENIGN_WRAPPERS
-
         if not isinstance(env.unwrapped, conf.RobotConfrontationEnv):
             return False
         layer = env

@@ -34,7 +34,7 @@ ACTION_TOL = 1e-6
 
 
 class QFunction(Protocol):
-    """Anything with ``q_values(obs, prefs) -> (n, A, m)`` vector Q-values (a :class:`~mope.agent.MoPE`)."""
+    """Anything with ``q_values(obs, prefs) -> (n, A, m)`` vector Q-values (a :class:`~mope.agent.agent.MoPE`)."""
 
     def q_values(self, obs: np.ndarray, prefs: np.ndarray) -> np.ndarray: ...
 

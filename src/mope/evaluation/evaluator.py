@@ -18,8 +18,7 @@ import gymnasium as gym
 import numpy as np
 
 from mope import metrics
-from mope.envs import default_ref_point, known_front
-from mope.envs.batched import make_batched
+from mope.envs import default_ref_point, known_front, make_batched
 from mope.preferences import equally_spaced, sample_simplex, validate_preference
 
 DEFAULT_MAX_STEPS = 1000
@@ -186,8 +185,8 @@ class GroundTruthCheck:
 
     @classmethod
     def for_env(cls, env: gym.Env, gamma: float, n_prefs: int = 101) -> GroundTruthCheck | None:
-        from mope.diagnose import tabular_model, value_iteration
         from mope.errors import EnvironmentError_
+        from mope.evaluation.diagnose import tabular_model, value_iteration
 
         if gamma >= 1:  # value iteration needs a discount below 1 (undiscounted loops have no finite value)
             return None
@@ -200,7 +199,7 @@ class GroundTruthCheck:
 
     def measure(self, agent: Any) -> dict[str, float]:
         """``path_error``, ``state_error`` and ``overestimation`` (mean, at the start state) of ``agent``."""
-        from mope.diagnose import agent_q, diagnose_q
+        from mope.evaluation.diagnose import agent_q, diagnose_q
 
         if not hasattr(agent, "q_values"):
             return dict.fromkeys(TRUTH_KEYS, float("nan"))
@@ -237,7 +236,7 @@ class Evaluator:
         self.close_loops = True
         self.ref_point = (np.asarray(ref_point, dtype=np.float64) if ref_point is not None
                           else default_ref_point(env, env_id, gamma, self.max_steps))
-        #: Exact values (:mod:`mope.diagnose`) where the environment's dynamics are known, else None; each
+        #: Exact values (:mod:`mope.evaluation.diagnose`) where the environment's dynamics are known, else None; each
         #: evaluation then also measures the greedy policy against them.
         self.ground_truth = GroundTruthCheck.for_env(env, gamma)
 

@@ -33,7 +33,7 @@ def _action_fn(policy: Any, pref: np.ndarray | None, space: Any = None) -> Calla
         own = getattr(policy, "action_space", None)
         if isinstance(space, gym.spaces.Box) and isinstance(own, gym.spaces.Box) and own.shape == space.shape \
                 and not (np.allclose(own.low, space.low) and np.allclose(own.high, space.high)):
-            from mope.baselines import rescale_to_box  # a model trained through RescaleAction (mope's PPO)
+            from mope.paper.ppo import rescale_to_box  # a model trained through RescaleAction (mope's PPO)
 
             return lambda obs: rescale_to_box(policy.predict(obs, deterministic=True)[0], space)
         return lambda obs: policy.predict(obs, deterministic=True)[0]

@@ -26,8 +26,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from mope.errors import ConfigError, MopeError, suggest
-from mope.locks import pid_alive
+from mope.errors import MopeError, suggest
+from mope.experiments.job_kinds import JOB_KINDS
+from mope.experiments.locks import pid_alive
 
 BACKENDS = ("local", "ray")
 RAY_MISSING = "the ray backend needs Ray: pip install 'mope[ray]'"
@@ -48,89 +49,6 @@ class Job:
     payload: dict[str, Any]
 
 
-# ------------------------------------------------------------------------------------------------------------
-# job kinds: (payload, folder) -> final metrics; each resumes or skips what is already there
-# ------------------------------------------------------------------------------------------------------------
-def _train_job(payload: dict[str, Any], out: Path) -> dict[str, Any]:
-    """A mope run (``payload`` is a config dict): resumed from resume.pt, started over if it has none yet."""
-    from mope.config import Config
-    from mope.experiments import train_run
-
-    train_run(Config.from_dict(payload), out, progress=False, overwrite=True, resume=True)
-    return json.loads((out / "summary.json").read_text()).get("final", {})
-
-
-def _ppo_job(payload: dict[str, Any], out: Path) -> dict[str, Any]:
-    """One PPO policy on ``w^T r`` (:func:`mope.baselines.train_ppo`), saved as ``policy.zip``."""
-    import torch
-
-    from mope.baselines import train_ppo
-
-    meta = {k: payload[k] for k in ("pref", "steps", "seed", "env_id")}
-    out.mkdir(parents=True, exist_ok=True)
-    if (out / "summary.json").is_file():
-        saved = json.loads((out / "summary.json").read_text())
-        if saved.get("meta") == meta:
-            return saved.get("final", {})
-        raise ConfigError(f"'{out}' holds a PPO policy trained with {saved.get('meta')}, not {meta}; use another --out")
-    torch.set_num_threads(1)
-    t0 = time.perf_counter()
-    model = train_ppo(payload["pref"], payload["steps"], payload["seed"], env_id=payload["env_id"],
-                      device=payload.get("device", "cpu"))
-    model.save(out / "policy.zip")
-    final = {"wall_s": time.perf_counter() - t0}
-    (out / "summary.json").write_text(json.dumps({"meta": meta, "final": final}) + "\n")  # marks the job done
-    return final
-
-
-def _envelope_job(payload: dict[str, Any], out: Path) -> dict[str, Any]:
-    """morl-baselines' Envelope (:class:`mope.peers.EnvelopeRunner`), evaluated with mope's protocol every
-    ``eval_every`` steps; writes ``peer.json``, ``metrics.csv`` and ``summary.json`` like a run folder (it cannot
-    resume: an interrupted Envelope job starts over)."""
-    import csv
-    import resource
-
-    from mope.config import Config
-    from mope.envs import make_env
-    from mope.evaluation import Evaluator
-    from mope.experiments import METRIC_COLUMNS
-    from mope.peers import EnvelopeRunner
-
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "peer.json").write_text(json.dumps({"method": "envelope", **payload}, indent=2) + "\n")
-    cfg = Config(env_id=payload["env_id"], seed=payload["seed"], total_steps=payload["total_steps"],
-                 eval_prefs=payload["eval_prefs"], max_episode_steps=payload.get("max_episode_steps"))
-    runner = EnvelopeRunner(cfg.env_id, cfg.seed, payload.get("gamma", 0.99), payload.get("overrides"),
-                            cfg.max_episode_steps)
-    evaluator = Evaluator.from_config(make_env(cfg.env_id, cfg.max_episode_steps), cfg)
-    rows, train_s = [], 0.0
-    with open(out / "metrics.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=METRIC_COLUMNS, extrasaction="ignore")
-        writer.writeheader()
-        while runner.global_step < cfg.total_steps:
-            t0 = time.perf_counter()
-            runner.train(min(payload["eval_every"], cfg.total_steps - runner.global_step))
-            train_s += time.perf_counter() - t0
-            res, _ = evaluator.evaluate(runner.policy())
-            rows.append({"step": runner.global_step, "wall_s": train_s, "train_s": train_s, **res})
-            writer.writerow({k: rows[-1].get(k, float("nan")) for k in METRIC_COLUMNS})
-            f.flush()
-    final = rows[-1]
-    summary = {"final": final, "wall_s": train_s, "s_per_1k_steps": 1000 * train_s / cfg.total_steps,
-               "train_s_per_1k_steps": 1000 * train_s / cfg.total_steps,
-               "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "method": "envelope"}
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
-    return final
-
-
-JOB_KINDS: dict[str, Callable[[dict[str, Any], Path], dict[str, Any]]] = {"train": _train_job, "ppo": _ppo_job,
-                                                                           "envelope": _envelope_job}
-
-
-#: Fields that do not change a run's results; a finished run whose saved config differs only in these is reused.
-NON_RESULT_FIELDS = ("device", "torch_threads", "log_every")
-
-
 def check_job_folders(jobs: list[Job], out: Path) -> None:
     """Refuse a batch whose training job's folder holds a run of another config (the batch changed since).
 
@@ -138,6 +56,7 @@ def check_job_folders(jobs: list[Job], out: Path) -> None:
         JobError: naming the folder and the differing fields with both values.
     """
     from mope.config import Config
+    from mope.experiments.runs import NON_RESULT_FIELDS
 
     for job in jobs:
         name = {"train": "config.json", "envelope": "peer.json"}.get(job.kind)

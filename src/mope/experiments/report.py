@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from mope.errors import MopeError, is_disk_full, short_repr
+from mope.experiments.stats import MetricStats, aggregate, bootstrap_ci
 
 DEFAULT_METRICS = ("cr", "igd", "hv", "eum", "optimal_share", "timeout_share", "path_error", "overestimation",
                    "win_share", "out_share")
@@ -66,19 +67,6 @@ class Run:
 
 
 @dataclass
-class MetricStats:
-    """Aggregate of one metric over the seeds of a group."""
-
-    n: int
-    mean: float
-    std: float
-    ci_low: float
-    ci_high: float
-    iqm: float
-    values: list[float]
-
-
-@dataclass
 class Group:
     """Runs that differ only in the seed."""
 
@@ -98,43 +86,6 @@ class ReportResult:
     table: str
     notes: list[str]
     files: dict[str, Path]
-
-
-# ------------------------------------------------------------------------------------------------------------
-# statistics
-# ------------------------------------------------------------------------------------------------------------
-def bootstrap_ci(values: Sequence[float], n_boot: int = 10_000, seed: int = 0,
-                 level: float = 0.95) -> tuple[float, float]:
-    """Percentile bootstrap confidence interval of the mean (NumPy generator seeded with ``seed``).
-
-    Resamples ``n`` values with replacement ``n_boot`` times and returns the ``(1 - level) / 2`` and
-    ``(1 + level) / 2`` percentiles of the resampled means. One value gives a zero-width interval.
-    """
-    x = np.asarray(values, dtype=np.float64)
-    if x.size == 0:
-        return math.nan, math.nan
-    rng = np.random.default_rng(seed)
-    means = x[rng.integers(0, x.size, size=(n_boot, x.size))].mean(axis=1)
-    lo, hi = np.percentile(means, [50 * (1 - level), 50 * (1 + level)])
-    return float(lo), float(hi)
-
-
-def iqm(values: Sequence[float]) -> float:
-    """Interquartile mean: the mean after dropping the lowest and highest 25% (``scipy.stats.trim_mean``)."""
-    from scipy.stats import trim_mean
-
-    x = np.asarray(values, dtype=np.float64)
-    return float(trim_mean(x, 0.25)) if x.size else math.nan
-
-
-def aggregate(values: Sequence[float], n_boot: int = 10_000, seed: int = 0) -> MetricStats:
-    """Mean, sample std (ddof 1; 0 for one value), bootstrap 95% CI and IQM of the finite values."""
-    x = np.asarray([v for v in values if math.isfinite(v)], dtype=np.float64)
-    if x.size == 0:
-        return MetricStats(0, math.nan, math.nan, math.nan, math.nan, math.nan, [])
-    lo, hi = bootstrap_ci(x, n_boot, seed)
-    std = float(x.std(ddof=1)) if x.size > 1 else 0.0
-    return MetricStats(int(x.size), float(x.mean()), std, lo, hi, iqm(x), [float(v) for v in x])
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -329,7 +280,7 @@ def _fmt(x: float, metric: str) -> str:
 
 def render_table(groups: Sequence[Group], metrics: Sequence[str]) -> str:
     """Markdown: one row per group; each metric as ``mean ± std [CI low, CI high]``, IQM columns from 4 seeds."""
-    from mope.plots import markdown_table
+    from mope.experiments.plots import markdown_table
 
     show_iqm = max(len(g.runs) for g in groups) >= 4
     header = ["group", "seeds", "steps"] + [METRIC_LABELS.get(m, m) for m in metrics]
@@ -364,7 +315,7 @@ def coverage_over_time(groups: Sequence[Group]) -> dict[str, dict[str, Any]]:
 
 def render_coverage(groups: Sequence[Group], cov: dict[str, dict[str, Any]]) -> str:
     """Markdown: seeds that reached CR = 1, the median first step, and the drop from the best CR to the final one."""
-    from mope.plots import markdown_table
+    from mope.experiments.plots import markdown_table
 
     rows = []
     for g in groups:
@@ -382,7 +333,7 @@ def render_coverage(groups: Sequence[Group], cov: dict[str, dict[str, Any]]) -> 
 def plot_learning_curves(groups: Sequence[Group], metrics: Sequence[str], path: str | Path, n_boot: int = 2000,
                          seed: int = 0) -> Path:
     """One panel per metric: each group's mean over seeds against steps, with a bootstrap 95% band."""
-    from mope.plots import plt, save_figure  # pyplot with the Agg backend
+    from mope.experiments.plots import plt, save_figure  # pyplot with the Agg backend
 
     fig, axes = plt.subplots(1, len(metrics), figsize=(4.6 * len(metrics), 3.8), squeeze=False)
     colors = _colors(groups)
@@ -406,7 +357,7 @@ def plot_learning_curves(groups: Sequence[Group], metrics: Sequence[str], path: 
 
 def _colors(groups: Sequence[Group]) -> list[str]:
     """The paper's colour per algorithm when each group is one algorithm; else matplotlib's cycle."""
-    from mope.plots import COLORS, plt
+    from mope.experiments.plots import COLORS, plt
 
     algos = [str(g.key.get("algo")) for g in groups]
     if len(set(algos)) == len(groups) and all(a in COLORS for a in algos):
@@ -445,8 +396,8 @@ def plot_final_fronts(groups: Sequence[Group], path: str | Path) -> Path | None:
 
     Returns ``None`` (and writes nothing) when no run has a ``solutions.csv``.
     """
+    from mope.experiments.plots import plt, save_figure  # pyplot with the Agg backend
     from mope.metrics import unique_solutions
-    from mope.plots import plt, save_figure  # pyplot with the Agg backend
 
     found = {}
     for g in groups:
@@ -496,7 +447,7 @@ def report(runs_dir: str | Path, out_dir: str | Path | None = None, metrics: Seq
     Raises:
         ReportError: for no runs, an unknown metric, or runs that differ beyond the swept fields.
     """
-    from mope.experiments import METRIC_COLUMNS
+    from mope.experiments.runs import METRIC_COLUMNS
 
     for m in metrics:
         if m not in METRIC_COLUMNS or m in ("step", "wall_s"):

@@ -41,16 +41,16 @@ from typing import Any
 import numpy as np
 import torch
 
-from mope.agent import MoPE, TrainingDivergedError, agent_class
-from mope.checkpoint import mope_version
+from mope.agent.agent import MoPE, TrainingDivergedError, agent_class
+from mope.agent.checkpoint import mope_version
+from mope.agent.runner import Callback, EvalCallback, IntervalStats, ProgressBar, StopWhen, crossed_now, train
 from mope.config import Config
 from mope.envs import make_env
 from mope.errors import CheckpointError, MopeError, is_disk_full, one_line, short_repr
-from mope.evaluation import OUTCOME_KEYS, TRUTH_KEYS, Evaluator, Solutions, solutions
-from mope.locks import FolderLock
+from mope.evaluation.evaluator import OUTCOME_KEYS, TRUTH_KEYS, Evaluator, Solutions, solutions
+from mope.experiments.locks import FolderLock
 from mope.metrics import EVALUATE_KEYS
 from mope.preferences import validate_preference
-from mope.runner import Callback, EvalCallback, IntervalStats, ProgressBar, StopWhen, crossed_now, train
 
 METRIC_COLUMNS = ["step", "wall_s", *EVALUATE_KEYS, "timeout_share", *TRUTH_KEYS, *OUTCOME_KEYS, "loss", "epsilon",
                   "train_s"]
@@ -173,10 +173,12 @@ def _environment_info() -> dict[str, Any]:
             "python": platform.python_version(), "machine": platform.machine(), "cpus": os.cpu_count()}
 
 
+#: Fields that do not change a run's results; a finished run whose saved config differs only in these is reused.
+NON_RESULT_FIELDS = ("device", "torch_threads", "log_every")
+
+
 def _same_run(saved: Config, wanted: Config) -> list[str]:
     """Fields that change results (not device, threads or log interval) in which two configs differ."""
-    from mope.jobs import NON_RESULT_FIELDS
-
     a, b = saved.to_dict(), wanted.to_dict()
     return [k for k in a if k not in NON_RESULT_FIELDS and a[k] != b.get(k)]
 
@@ -393,8 +395,8 @@ def check_resources(config: Config) -> None:
     """Refuse, before anything is allocated or touched, a run that cannot start: an unknown or unsupported
     environment, a device that is not there, more evaluation preferences than :data:`MAX_EVAL_PREFS`, or a replay
     buffer and networks larger than the memory available."""
-    from mope.agent_state import resolve_device
-    from mope.evaluation import check_eval_prefs
+    from mope.agent.agent_state import resolve_device
+    from mope.evaluation.evaluator import check_eval_prefs
 
     check_eval_prefs(config.run.eval_prefs, "eval_prefs")
     resolve_device(config.run.device)
@@ -503,10 +505,11 @@ def train_run(config: Config, out_dir: str | Path, progress: bool = True, overwr
         resume: Continue the run in ``out_dir`` from ``checkpoints/resume.pt``; return a finished run as it is;
             start the run over if there is nothing to resume (a run killed before its first checkpoint).
 
-    The folder is locked while the run writes it (:class:`~mope.locks.FolderLock`): a second writer is refused.
+    The folder is locked while the run writes it (:class:`~mope.experiments.locks.FolderLock`): a second writer is
+    refused.
     Ctrl-C (SIGINT) or SIGTERM stops training at the next step boundary, saves ``checkpoints/resume.pt``
     (the whole training state) and raises ``KeyboardInterrupt``; no finished evaluation or trained weights are
-    lost. A NaN or inf raises :class:`~mope.agent.TrainingDivergedError` naming the step and the quantity and
+    lost. A NaN or inf raises :class:`~mope.agent.agent.TrainingDivergedError` naming the step and the quantity and
     leaves the last good checkpoints untouched.
     """
     out = Path(out_dir)
@@ -653,7 +656,7 @@ def load_agent(path: str | Path, device: str | None = None) -> MoPE:
 def evaluate_checkpoint(path: str | Path, n_prefs: int = 2000, seed: int | None = None,
                         out: str | Path | None = None, device: str | None = None) -> tuple[dict[str, float], Solutions]:
     """Evaluate a checkpoint (or a run's final checkpoint) with the CR protocol; optionally write solutions."""
-    from mope.evaluation import check_eval_prefs
+    from mope.evaluation.evaluator import check_eval_prefs
 
     if n_prefs < 1:
         raise MopeError(f"--prefs {n_prefs} is out of range: must be >= 1")

@@ -37,8 +37,8 @@ from typing import Any
 
 from mope.config import Config, _parse_problem, load_yaml, read_text_file
 from mope.errors import ConfigError, short_repr, suggest
-from mope.jobs import Job, JobError, check_backend, check_job_folders, run_jobs
-from mope.locks import FolderLock
+from mope.experiments.jobs import Job, JobError, check_backend, check_job_folders, run_jobs
+from mope.experiments.locks import FolderLock
 
 SPEC_KEYS = ("name", "base", "grid", "arms", "seeds", "seed")
 #: A sweep may hold this many trials at most (each is validated before any runs, and sweep.json lists them all).
@@ -361,7 +361,8 @@ def check_existing(trials: Iterable[Trial], out: Path) -> None:
 # ------------------------------------------------------------------------------------------------------------
 def run_sweep(spec: SweepSpec | str | Path, out_dir: str | Path | None = None, backend: str = "local",
               address: str | None = None, workers: int | None = None, progress: bool = True) -> list[TrialResult]:
-    """Run every trial of a sweep through :func:`mope.jobs.run_jobs`; skip finished trials, resume interrupted ones.
+    """Run every trial of a sweep through :func:`mope.experiments.jobs.run_jobs`; skip finished trials, resume
+    interrupted ones.
 
     Args:
         spec: A :class:`SweepSpec` or the path of a YAML spec.

@@ -1,12 +1,13 @@
 """``mope benchmark``: mope's variants beside morl-baselines' Envelope on several MO-Gymnasium environments.
 
 One command trains and evaluates a grid of (environment, method, seed) in one run, through the job runner
-(:mod:`mope.jobs`: local processes or Ray, every job in a fresh process so its peak memory is its own; a re-run
-keeps the finished jobs and resumes the interrupted ones), then writes one table and one figure per environment.
+(:mod:`mope.experiments.jobs`: local processes or Ray, every job in a fresh process so its peak memory is its
+own; a re-run keeps the finished jobs and resumes the interrupted ones), then writes one table and one figure
+per environment.
 
 Methods: ``mope`` and ``eql`` (the defaults), ``mope-paper`` and ``eql-paper`` (the paper preset), and
-``envelope`` (morl-baselines' Envelope at its example's settings, :data:`mope.peers.ENVELOPE_EXAMPLE`; needs the
-optional ``bench`` extra). Environments and their evaluation settings and budgets: :data:`BENCH_ENVS`.
+``envelope`` (morl-baselines' Envelope at its example's settings, :data:`mope.paper.envelope.ENVELOPE_EXAMPLE`;
+needs the optional ``bench`` extra). Environments and their evaluation settings and budgets: :data:`BENCH_ENVS`.
 
 Per environment and method: CR where the front is known, EUM and its gap to the optimum, HV, the optimal share,
 time-outs, the steps and training seconds until CR = 1 (or, without a known front, until 95 % of the best final
@@ -28,8 +29,8 @@ import numpy as np
 
 from mope.config import Config
 from mope.errors import ConfigError, MopeError, suggest
-from mope.jobs import Job, run_jobs
-from mope.locks import FolderLock
+from mope.experiments.jobs import Job, run_jobs
+from mope.experiments.locks import FolderLock
 
 
 @dataclass(frozen=True)
@@ -79,15 +80,15 @@ DEFAULT_METHODS = ("mope", "eql", "mope-paper", "envelope")
 def check_choices(envs: list[str], methods: list[str], seeds: int | str | Sequence[int], steps: int | None
                   ) -> list[int]:
     """One-line errors for an unknown environment or method, a continuous-action environment, bad seeds or a
-    budget <= 0; returns the seeds (:func:`mope.sweep.seed_list`)."""
+    budget <= 0; returns the seeds (:func:`mope.experiments.sweep.seed_list`)."""
     from mope.envs import make_env
-    from mope.sweep import seed_list
+    from mope.experiments.sweep import seed_list
 
     for env_id in envs:
         if env_id not in BENCH_ENVS:
             make_env(env_id)  # an unknown id or a continuous-action env gets make_env's own message
             raise ConfigError(f"environment '{env_id}' has no benchmark settings; choose from {', '.join(BENCH_ENVS)}"
-                              " (or add it to mope.benchmark.BENCH_ENVS)")
+                              " (or add it to mope.paper.benchmark.BENCH_ENVS)")
     for m in methods:
         if m not in METHODS:
             raise ConfigError(f"unknown method '{m}'{suggest(m, METHODS)}; choose from {', '.join(METHODS)}")
@@ -95,7 +96,7 @@ def check_choices(envs: list[str], methods: list[str], seeds: int | str | Sequen
     if steps is not None and steps < 1:
         raise ConfigError(f"--steps {steps} is out of range: must be >= 1 (the budget)")
     if "envelope" in methods:
-        from mope.peers import require_morl_baselines
+        from mope.paper.envelope import require_morl_baselines
 
         require_morl_baselines()
     return seed_values
@@ -104,7 +105,7 @@ def check_choices(envs: list[str], methods: list[str], seeds: int | str | Sequen
 def benchmark_jobs(envs: list[str], methods: list[str], seeds: Sequence[int], quick: bool, steps: int | None
                    ) -> list[Job]:
     """One job per (seed, environment, method), seed-major (a stopped benchmark has whole seeds to report)."""
-    from mope.peers import ENVELOPE_EXAMPLE
+    from mope.paper.envelope import ENVELOPE_EXAMPLE
 
     jobs = []
     for seed in seeds:
@@ -130,7 +131,7 @@ def benchmark_jobs(envs: list[str], methods: list[str], seeds: Sequence[int], qu
 
 
 def _read_run(folder: Path) -> dict[str, Any]:
-    from mope.experiments import read_metrics
+    from mope.experiments.runs import read_metrics
 
     rows = read_metrics(folder)
     summary = json.loads((folder / "summary.json").read_text())
@@ -149,7 +150,7 @@ def _first(rows: list[dict[str, float]], ok: Any) -> tuple[float, float]:
 
 def summarise(out: Path, jobs: list[Job]) -> dict[str, dict[str, dict[str, Any]]]:
     """Per environment, per method: the metrics' values over seeds, aggregated (mean, bootstrap CI)."""
-    from mope.report import aggregate
+    from mope.experiments.stats import aggregate
 
     runs: dict[str, dict[str, list[dict[str, Any]]]] = {}
     for job in jobs:
@@ -194,7 +195,7 @@ def _cell(stats: dict[str, Any], fmt: str) -> str:
 
 def render(summary: dict[str, dict[str, dict[str, Any]]], quick: bool, info: dict[str, Any]) -> str:
     """The markdown report: one table per environment, ratios to Envelope where it ran."""
-    from mope.plots import markdown_table
+    from mope.experiments.plots import markdown_table
 
     lines = [f"# mope benchmark{' (--quick)' if quick else ''}", "",
              f"Machine: {info['machine']}; {info['date']}; wall time {info['wall_s']:.0f} s. Command: "
@@ -236,7 +237,7 @@ def render(summary: dict[str, dict[str, dict[str, Any]]], quick: bool, info: dic
 
 def plot_curves(out: Path, jobs: list[Job], dest: Path) -> list[Path]:
     """One figure per environment: CR (or EUM), EUM and time-outs against steps, mean and 95 % band per method."""
-    from mope.plots import mean_ci, plt, save_figure
+    from mope.experiments.plots import mean_ci, plt, save_figure
 
     paths = []
     by_env: dict[str, dict[str, list[list[dict[str, float]]]]] = {}
@@ -276,7 +277,7 @@ def run_benchmark(out: str | Path, envs: list[str] | None = None, methods: list[
         envs: Environments (default: every one of :data:`BENCH_ENVS`).
         methods: Methods (default: mope, eql, mope-paper, and envelope when morl-baselines is installed).
         seeds: Seeds per (environment, method): a count ``N`` (``0..N-1``), a range ``"5-9"`` or a list
-            (:func:`mope.sweep.seed_list`); ``quick`` forces seed 0 alone.
+            (:func:`mope.experiments.sweep.seed_list`); ``quick`` forces seed 0 alone.
         quick: Small budgets (each environment's ``quick_steps``), one seed, at most 100 preferences and 200-step
             episodes per evaluation, two evaluations per run: a first look, and CI's test.
         steps: Override every environment's budget.

@@ -3,8 +3,8 @@
 Trains, per seed, EQL and MoPE on ``mope/RobotConfrontationDiscrete-v0`` (one preference-conditioned agent
 each) and the outer-loop PPO baseline on ``mope/RobotConfrontation-v0`` (one policy per preference, K of them,
 on the scalarised reward ``w^T r`` through MO-Gymnasium's ``LinearReward``). Every run goes into its own folder
-and every run goes through the job runner (:mod:`mope.jobs`): a finished run is reused and an interrupted one
-resumes from its last checkpoint, locally or on Ray.
+and every run goes through the job runner (:mod:`mope.experiments.jobs`): a finished run is reused and an interrupted
+one resumes from its last checkpoint, locally or on Ray.
 
 Budget (``steps``): EQL and MoPE get ``steps`` environment steps each. With ``ppo_budget="each"`` (default)
 every PPO policy also gets ``steps``, so each trained policy sees as much experience as the one EQL/MoPE
@@ -40,8 +40,8 @@ import numpy as np
 import mope.envs.confrontation as conf
 from mope.config import Config
 from mope.errors import ConfigError, MopeError
-from mope.jobs import Job, run_jobs
-from mope.locks import FolderLock
+from mope.experiments.jobs import Job, run_jobs
+from mope.experiments.locks import FolderLock
 
 METHODS = ("ppo", "eql", "mope")
 #: Red's reference policies (mope.envs.confrontation_batch.REFERENCE_POLICIES), one point each: the points a
@@ -106,8 +106,8 @@ def evaluate_agent(run_dir: Path, prefs: np.ndarray, episodes: int, record_prefs
     """Play a trained EQL/MoPE run under each preference; return its episodes (and recorded games)."""
     import mo_gymnasium as mo_gym
 
-    from mope.agent import MoPE
-    from mope.baselines import play_episodes
+    from mope.agent.agent import MoPE
+    from mope.paper.ppo import play_episodes
 
     agent = MoPE.load(run_dir / "checkpoints" / "final.pt")
     c = agent.config
@@ -132,7 +132,7 @@ def evaluate_ppo(folders: list[Path], episodes: int, gamma: float = 0.99) -> tup
     import mo_gymnasium as mo_gym
     from stable_baselines3 import PPO
 
-    from mope.baselines import Episodes, play_episodes, ppo_policy
+    from mope.paper.ppo import Episodes, play_episodes, ppo_policy
 
     prefs, parts = [], []
     for folder in folders:
@@ -156,8 +156,8 @@ def plot_fig5(points: dict[str, np.ndarray], path: Path, references: dict[str, n
     import matplotlib
 
     matplotlib.use("Agg")
+    from mope.experiments.plots import plt, save_figure
     from mope.metrics import pareto_front
-    from mope.plots import plt, save_figure
 
     fig, ax = plt.subplots(figsize=(6.4, 4.6))
     for name, pts in points.items():
@@ -228,9 +228,9 @@ def ppo_name(seed: int, k: int) -> str:
 
 def check_confrontation_args(seeds: int | str | Sequence[int], steps: int, ppo_prefs: int, eval_prefs: int,
                              episodes: int, workers: int, ppo_budget: str) -> tuple[list[int], int]:
-    """Validate the arguments; return the seeds (:func:`mope.sweep.seed_list`) and the steps each PPO policy
+    """Validate the arguments; return the seeds (:func:`mope.experiments.sweep.seed_list`) and the steps each PPO policy
     gets."""
-    from mope.sweep import seed_list
+    from mope.experiments.sweep import seed_list
 
     seed_values = seed_list(seeds)
     for name, val in (("steps", steps), ("ppo_prefs", ppo_prefs), ("eval_prefs", eval_prefs),
@@ -248,8 +248,8 @@ def check_confrontation_args(seeds: int | str | Sequence[int], steps: int, ppo_p
 def evaluate_confrontation(out: Path, seeds: Sequence[int], ppo_prefs: int, eval_prefs: int, episodes: int,
                            max_steps: int | None) -> tuple[dict[str, list[dict[str, Any]]], Any]:
     """Every method's summary per seed, and MoPE's recorded Fig. 6 games (the first seed)."""
-    from mope.baselines import Episodes
     from mope.envs.confrontation_batch import play_reference
+    from mope.paper.ppo import Episodes
     from mope.preferences import equally_spaced
 
     probe = conf.RobotConfrontationEnv()
@@ -302,7 +302,7 @@ def reference_front_hv(per_seed: dict[str, list[dict[str, Any]]], ref: np.ndarra
 def confrontation_table(results: dict[str, Any], seeds: int, steps: int, ppo_steps: int, ppo_prefs: int,
                         eval_prefs: int) -> str:
     """The reproduction's table (mean ± std over seeds)."""
-    from mope.plots import markdown_table
+    from mope.experiments.plots import markdown_table
 
     def pm(d: dict[str, float], fmt: str) -> str:
         return f"{d['mean']:{fmt}}" if seeds == 1 else f"{d['mean']:{fmt}} ± {d['std']:{fmt}}"
@@ -331,7 +331,7 @@ def reproduce_confrontation(out: str | Path, seeds: int | str | Sequence[int] = 
     Args:
         out: Output folder (run folders ``eql-s<seed>``, ``mope-s<seed>``, ``ppo-s<seed>-pref<k>`` inside).
         seeds: Seeds per method: a count ``N`` (``0..N-1``), a range ``"5-9"`` or a list
-            (:func:`mope.sweep.seed_list`); the figures show the first.
+            (:func:`mope.experiments.sweep.seed_list`); the figures show the first.
         steps: Environment steps per EQL/MoPE agent, and per PPO policy (``ppo_budget="each"``) or for all K
             together (``"shared"``).
         ppo_prefs: K, PPO's equally spaced preferences.

@@ -26,8 +26,8 @@ import numpy as np
 
 from mope.config import Config, check_algo
 from mope.errors import ConfigError, MopeError
-from mope.jobs import Job, run_jobs
-from mope.locks import FolderLock
+from mope.experiments.jobs import Job, run_jobs
+from mope.experiments.locks import FolderLock
 
 DST = "deep-sea-treasure-v0"
 CURVES = ("cr", "optimal_share", "timeout_share")
@@ -63,9 +63,9 @@ def discriminator_map(agent: Any) -> np.ndarray | None:
 
 def analyse_run(run_dir: Path, n_prefs: int) -> dict[str, Any]:
     """Final evaluation of a run with recorded paths: metrics, diversity, and what the figures need."""
-    from mope.agent import MoPE
-    from mope.diversity import distinct_paths, state_preference_mi
-    from mope.evaluation import Evaluator
+    from mope.agent.agent import MoPE
+    from mope.evaluation.diversity import distinct_paths, state_preference_mi
+    from mope.evaluation.evaluator import Evaluator
     from mope.metrics import convex_coverage_set
 
     agent = MoPE.load(run_dir / "checkpoints" / "final.pt")
@@ -85,11 +85,12 @@ def dst_jobs(seeds: int | str | Sequence[int], steps: int, eval_every: int, algo
              **overrides: Any) -> list[Job]:
     """Validate the arguments and build one training job per (seed, variant), seed-major.
 
-    ``seeds`` is a count ``N`` (seeds ``0..N-1``), a range ``"5-9"`` or a list (:func:`mope.sweep.seed_list`).
+    ``seeds`` is a count ``N`` (seeds ``0..N-1``), a range ``"5-9"`` or a list
+    (:func:`mope.experiments.sweep.seed_list`).
     Seed-major: every variant's first seed comes before any second one, so a stopped reproduction can be analysed
     with fewer seeds (re-run with a smaller ``--seeds``; finished runs are reused).
     """
-    from mope.sweep import seed_list
+    from mope.experiments.sweep import seed_list
 
     for a in algos:
         check_algo(a)
@@ -122,7 +123,7 @@ def summarise_variant(out: Path, algo: str, seeds: Sequence[int], n_prefs: int
                       ) -> tuple[dict[str, Any], dict[str, Any], dict]:
     """Final evaluation of every seed of one variant: its results entry, its first seed's analysis and its
     curves."""
-    from mope.experiments import read_metrics
+    from mope.experiments.runs import read_metrics
 
     metric_rows = [read_metrics(out / run_name(algo, s)) for s in seeds]
     n = min(len(r) for r in metric_rows)
@@ -147,10 +148,11 @@ def summarise_variant(out: Path, algo: str, seeds: Sequence[int], n_prefs: int
 
 
 def _mean_ci(values: Sequence[float]) -> dict[str, Any]:
-    """The diversity measures of Fig. 3 over seeds: :func:`mope.report.aggregate` (mean, std, bootstrap CI)."""
+    """The diversity measures of Fig. 3 over seeds: :func:`mope.experiments.stats.aggregate` (mean, std,
+    bootstrap CI)."""
     from dataclasses import asdict
 
-    from mope.report import aggregate
+    from mope.experiments.stats import aggregate
 
     return asdict(aggregate(values))
 
@@ -158,7 +160,7 @@ def _mean_ci(values: Sequence[float]) -> dict[str, Any]:
 def render_dst(out: Path, algos: Sequence[str], results: dict[str, Any], analyses: dict[str, Any],
                curves: dict[str, dict[str, Any]]) -> str:
     """Write Fig. 2, Fig. 3 and table.md; return the table."""
-    from mope.plots import plot_curves, plot_discriminator_maps, plot_fronts, plot_preference_solutions
+    from mope.experiments.plots import plot_curves, plot_discriminator_maps, plot_fronts, plot_preference_solutions
 
     plot_curves(curves["cr"], out / "fig2a_cr.png")
     plot_curves(curves["optimal_share"], out / "fig2a_optimal_share.png", ylabel="optimal share",
@@ -181,7 +183,7 @@ def render_dst(out: Path, algos: Sequence[str], results: dict[str, Any], analyse
 
 def dst_table(algos: Sequence[str], results: dict[str, Any]) -> str:
     """The reproduction's table: final metrics (mean ± std over seeds), coverage speed and diversity."""
-    from mope.plots import markdown_table
+    from mope.experiments.plots import markdown_table
 
     def pm(d: dict[str, float], fmt: str = ".3f") -> str:
         return f"{d['mean']:{fmt}} ± {d['std']:{fmt}}"
@@ -211,10 +213,11 @@ def reproduce_dst(out: str | Path, seeds: int | str | Sequence[int] = 3, steps: 
                   **overrides: Any) -> dict[str, Any]:
     """Train, evaluate and plot the DST experiment; see the module docstring for the outputs.
 
-    Runs go through :func:`mope.jobs.run_jobs` (local processes or Ray), so an interrupted reproduction resumes:
+    Runs go through :func:`mope.experiments.jobs.run_jobs` (local processes or Ray), so an interrupted reproduction
+    resumes:
     finished runs are reused and interrupted ones continue from their last checkpoint.
     """
-    from mope.sweep import seed_list
+    from mope.experiments.sweep import seed_list
 
     seeds = seed_list(seeds)
     jobs = dst_jobs(seeds, steps, eval_every, algos, env_id, **overrides)

@@ -16,7 +16,9 @@ import dataclasses
 import functools
 import json
 import math
-from collections.abc import Callable
+import types
+import typing
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -93,19 +95,45 @@ def _finite(x: Any) -> bool:
     return _is_num(x) and math.isfinite(x)
 
 
-#: Type annotation (as written in the dataclasses) -> (check, what the value must be).
-_TYPE_CHECKS: dict[str, tuple[Callable[[Any], bool], str]] = {
-    "int": (_is_int, "an integer"),
-    "float": (_is_num, "a number"),
-    "bool": (lambda x: isinstance(x, bool), "true or false"),
-    "str": (lambda x: isinstance(x, str), "a string"),
-    "int | None": (lambda x: x is None or _is_int(x), "an integer or null"),
-    "float | None": (lambda x: x is None or _is_num(x), "a number or null"),
-    "tuple[int, ...]": (lambda x: isinstance(x, (list, tuple)) and all(_is_int(v) for v in x),
-                        "a list of integers"),
-    "tuple[float, ...] | None": (lambda x: x is None or (isinstance(x, (list, tuple)) and all(_is_num(v) for v in x)),
-                                 "a list of numbers or null"),
+#: Plain type -> (check, what a value of it must be). :func:`_type_check` builds the check of a field from its real
+#: type hint (``typing.get_type_hints``): these types, ``X | None`` and ``tuple[X, ...]`` of them.
+_SCALAR_CHECKS: dict[type, tuple[Callable[[Any], bool], str]] = {
+    int: (_is_int, "an integer"),
+    float: (_is_num, "a number"),
+    bool: (lambda x: isinstance(x, bool), "true or false"),
+    str: (lambda x: isinstance(x, str), "a string"),
 }
+_PLURALS = {"an integer": "integers", "a number": "numbers", "true or false": "booleans", "a string": "strings"}
+
+
+def _type_check(hint: Any) -> tuple[Callable[[Any], bool], str] | None:
+    """(check, what the value must be) for a type hint; None for a nested settings dataclass (checked by itself).
+
+    Raises:
+        TypeError: for a hint no check is written for (a new field of another type must add one here).
+    """
+    args = typing.get_args(hint)
+    if isinstance(hint, types.UnionType) and len(args) == 2 and type(None) in args:
+        inner = _type_check(next(a for a in args if a is not type(None)))
+        if inner is not None:
+            ok, what = inner
+            return (lambda x: x is None or ok(x)), f"{what} or null"
+    elif typing.get_origin(hint) is tuple and len(args) == 2 and args[1] is Ellipsis and args[0] in _SCALAR_CHECKS:
+        item, what = _SCALAR_CHECKS[args[0]]
+        return (lambda x: isinstance(x, (list, tuple)) and all(item(v) for v in x)), f"a list of {_PLURALS[what]}"
+    elif hint in _SCALAR_CHECKS:
+        return _SCALAR_CHECKS[hint]
+    elif dataclasses.is_dataclass(hint):
+        return None
+    raise TypeError(f"no type check for the type hint {hint!r}")
+
+
+@functools.cache
+def _field_checks(cls: type) -> dict[str, tuple[Callable[[Any], bool], str]]:
+    """The type check of every field of a settings dataclass, from its real type hints."""
+    hints = typing.get_type_hints(cls)
+    checks = {f.name: _type_check(hints[f.name]) for f in dataclasses.fields(cls)}
+    return {name: check for name, check in checks.items() if check is not None}
 
 
 #: Integers must fit a signed 64-bit integer: numpy's and torch's seeds, array sizes and step counters are 64-bit,
@@ -123,15 +151,12 @@ def _too_big(value: Any) -> bool:
 def _check_types(obj: Any) -> None:
     """Raise :class:`ConfigError` for a field of the wrong type (a quoted number, a bool for a count, ...) or an
     integer beyond 64 bits. Values are shown cut short: no check formats a huge value whole."""
-    for f in dataclasses.fields(obj):
-        if f.type not in _TYPE_CHECKS:
-            continue
-        ok, what = _TYPE_CHECKS[f.type]
-        value = getattr(obj, f.name)
+    for name, (ok, what) in _field_checks(type(obj)).items():
+        value = getattr(obj, name)
         if not ok(value):
-            raise ConfigError(f"{f.name}={short_repr(value)} is not {what}")
+            raise ConfigError(f"{name}={short_repr(value)} is not {what}")
         if _too_big(value):
-            raise ConfigError(f"{f.name}={short_repr(value)} is out of range: integers must lie in "
+            raise ConfigError(f"{name}={short_repr(value)} is out of range: integers must lie in "
                               f"[-{INT64_MAX}, {INT64_MAX}] (64 bits)")
 
 
@@ -183,9 +208,10 @@ class Config:
     """All settings of one training run: the learner's hyperparameters, and ``run`` (:class:`RunSettings`).
 
     Hyperparameters are grouped as: task, EQL core, prioritized replay, experience exploration (EE),
-    preference exploration (PE). ``algo`` is derived from the two exploration switches. Every setting, those of
-    ``run`` included, is one flat key for ``Config(**kwargs)``, ``--set KEY=VALUE``, sweep specs and
-    ``config.json``; in code, run settings are read as ``config.run.eval_every``.
+    preference exploration (PE), demonstrations, and the experimental options the studies did not adopt.
+    ``algo`` is derived from the two exploration switches. Every setting, those of ``run`` included, is one flat
+    key for ``Config(**kwargs)``, ``--set KEY=VALUE``, sweep specs and ``config.json``; in code, run settings are
+    read as ``config.run.eval_every``.
     """
 
     # --- task ------------------------------------------------------------------------------------------
@@ -202,20 +228,13 @@ class Config:
 
     # --- EQL core (paper eq. 4; Yang et al. 2019) ------------------------------------------------------------
     gamma: float = 0.99
-    #: Rewards times this constant in the targets (all objectives alike: no greedy action changes); 1: off.
-    reward_scale: float = 1.0
     #: Q-network head: "conditioned" (the paper: omega is an input, one vector per action and objective) or
     #: "convex" (C return vectors per action; Q(s, a, w) is the one w prefers: mope.agent.networks.ConvexQNetwork).
     q_head: str = "convex"
     #: C, return vectors per action of the convex head.
     n_components: int = 12
-    #: H, heads of the convex head whose minimum is Q (Maxmin Q-learning, Lan et al. 2020); 1: a single head.
-    #: The conditioned head has one head whatever this says.
-    n_critics: int = 1
     #: Weight of the convex head's component loss (each target also trains its nearest component).
     component_loss_weight: float = 1.0
-    #: Within the component loss, weight of the pull of every component toward its nearest target (0: off).
-    component_anchor_weight: float = 0.0
     hidden_sizes: tuple[int, ...] = (256, 256, 256)
     learning_rate: float = 3e-4
     #: Cosine decay of the learning rate to this value over total_steps; None keeps it constant.
@@ -284,7 +303,7 @@ class Config:
     #: The constant in p(omega) ~ (N_i + c)^(-1/2); the paper uses 0.01.
     pe_count_offset: float = 0.01
 
-    # --- demonstrations (DQfD, Hester et al. 2018; mope.agent.demonstrations) ----------------------------------------
+    # --- demonstrations (DQfD, Hester et al. 2018; mope.agent.demonstrations) ---------------------------------
     #: "" (none), "scripted" (the env's scripted policies, each at the preferences it is good at), or an .npz file
     #: of episodes (mope.agent.demonstrations.save_demonstrations). Kept in replay for good.
     demos: str = ""
@@ -298,6 +317,16 @@ class Config:
     demo_pretrain_steps: int = 0
     #: Share of every batch drawn uniformly from the demonstrations (0: they compete in prioritized replay).
     demo_batch_share: float = 0.0
+
+    # --- experimental: options the studies tried and did not adopt (off by default; docs/design.md) -----------
+    # Each came out of probing the mirrored map's divergence and fixed some seeds but not others.
+    #: H, heads of the convex head whose minimum is Q (Maxmin Q-learning, Lan et al. 2020); 1: a single head.
+    #: The conditioned head has one head whatever this says.
+    n_critics: int = 1
+    #: Within the component loss, weight of the pull of every component toward its nearest target (0: off).
+    component_anchor_weight: float = 0.0
+    #: Rewards times this constant in the targets (all objectives alike: no greedy action changes); 1: off.
+    reward_scale: float = 1.0
 
     run: RunSettings = field(default_factory=RunSettings)
 
@@ -370,21 +399,12 @@ class Config:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Config:
-        """Build from a flat dict (a saved config or overrides). ``algo`` sets the exploration switches;
-        ``preset`` (see :data:`PRESETS`) sets defaults that the other keys override.
-
-        A config saved by mope 0.1 (it has the field ``extra``, always empty, and none of 0.2's) is read with the
-        ``paper`` preset's values for the fields it predates, which were 0.1's defaults. A config saved by 0.2.0
-        (every field but those of :data:`LATER_FIELDS`) is read with the values of :data:`LATER_FIELDS`.
+        """Build from a flat dict (a saved config or overrides), the one entry point for dicts and files.
+        ``algo`` sets the exploration switches; ``preset`` (see :data:`PRESETS`) sets defaults that the other keys
+        override. A config saved by an older mope is read as it ran (:func:`migrate`).
         """
-        data = dict(data)
-        if "extra" in data and "q_head" not in data:  # saved by mope 0.1: its defaults are the paper preset's
-            data = {**PRESETS["paper"], **data}
-        data.pop("extra", None)
+        data = migrate(data)
         names = cls.field_names()
-        later = [k for k in LATER_FIELDS if k not in data]
-        if later and "q_head" in data and set(names) - set(data) == set(later):  # saved before these fields
-            data = {**{k: LATER_FIELDS[k] for k in later}, **data}
         preset = data.pop("preset", None)
         if preset in (None, "mope") and data.get("env_id") in ENV_DEFAULTS:
             data = {**ENV_DEFAULTS[data["env_id"]], **data}
@@ -396,10 +416,10 @@ class Config:
                 raise unknown_key_error(key)
         if algo is not None:
             return cls.for_algo(algo, **data)
-        types = {f.name: f.type for f in (*dataclasses.fields(cls), *dataclasses.fields(RunSettings))}
+        hints = {**typing.get_type_hints(RunSettings), **typing.get_type_hints(cls)}
         for key, value in data.items():
             # ints given as floats ("20000.0") are user slips: coerce where lossless.
-            if types[key] in ("int", "int | None") and isinstance(value, float) and value.is_integer():
+            if hints[key] in (int, int | None) and isinstance(value, float) and value.is_integer():
                 data[key] = int(value)
         return cls(**data)
 
@@ -418,6 +438,24 @@ class Config:
     def load(cls, path: str | Path) -> Config:
         """Read a config from JSON or YAML."""
         return cls.from_dict(read_config_file(path))
+
+
+def migrate(data: dict[str, Any]) -> dict[str, Any]:
+    """A saved config of an older mope, brought to today's fields with the values it ran with (a copy).
+
+    A config saved by mope 0.1 (it has the field ``extra``, always empty, and none of 0.2's) gets the ``paper``
+    preset's values for the fields it predates, which were 0.1's defaults. A config saved by 0.2.0 (every field
+    but those of :data:`LATER_FIELDS`) gets the values of :data:`LATER_FIELDS`. Anything else (today's configs,
+    a user's overrides) is returned as it is.
+    """
+    data = dict(data)
+    if "extra" in data and "q_head" not in data:  # saved by mope 0.1: its defaults are the paper preset's
+        data = {**PRESETS["paper"], **data}
+    data.pop("extra", None)
+    later = [k for k in LATER_FIELDS if k not in data]
+    if later and "q_head" in data and set(Config.field_names()) - set(data) == set(later):  # saved before these
+        data = {**{k: LATER_FIELDS[k] for k in later}, **data}
+    return data
 
 
 def _validate_hyperparameters(self: Config) -> None:
@@ -555,45 +593,69 @@ def unknown_key_error(key: str) -> ConfigError:
     return ConfigError(f"unknown config key '{key}'{hint}")
 
 
-def parse_overrides(items: list[str]) -> dict[str, Any]:
-    """Config overrides from ``KEY=VALUE`` strings (the CLI's ``--set``).
+#: Fields that also take ``64,64`` for a list of integers.
+_INT_LIST_FIELDS = ("hidden_sizes", "disc_hidden")
 
-    VALUE is read as JSON when it parses (numbers, lists, null), else as a string; ``hidden_sizes`` and
-    ``disc_hidden`` also take ``256,256``. ``preset`` names a preset. Types and ranges are checked later, by
+
+def parse_set(items: Sequence[str] | None, check_keys: bool = False,
+              error: type[ConfigError] = ConfigError) -> dict[str, Any]:
+    """``KEY=VALUE`` strings (every command's ``--set``, a sweep's included) as a dict; the one ``--set`` parser.
+
+    VALUE is read as JSON when it parses (numbers, ``1e-3`` included, lists, true/false, null), else as YAML (flow
+    lists and mappings: ``[8, 8]``, ``{a: 1}``), else kept as the string; ``hidden_sizes`` and ``disc_hidden``
+    also take ``256,256``. A dash in KEY reads as an underscore. Types and ranges are checked later, by
     :class:`Config`.
 
     Args:
-        items: ``KEY=VALUE`` strings; a dash in KEY reads as an underscore.
-
-    Returns:
-        The overrides by field name.
+        items: The ``KEY=VALUE`` strings.
+        check_keys: Refuse a KEY that is no field of :class:`Config` (``preset`` must name a preset).
+        error: The error class to raise (a sweep raises its own).
 
     Raises:
-        ConfigError: An item is not ``KEY=VALUE``, KEY is no field, or a list of integers does not parse.
+        ConfigError: An item is not ``KEY=VALUE``, a list of integers does not parse, a YAML value expands beyond
+            :data:`MAX_FILE_VALUES` values; with ``check_keys``, KEY is no field.
     """
     out: dict[str, Any] = {}
     names = Config.field_names()
-    for item in items:
+    for item in items or ():
         if "=" not in item:
-            raise ConfigError(f"--set '{item}' is not KEY=VALUE")
+            raise error(f"--set '{item}' is not KEY=VALUE")
         key, raw = item.split("=", 1)
         key = key.strip().replace("-", "_")
-        if key == "preset":
+        if check_keys and key == "preset":
             out[key] = check_preset(raw.strip())
             continue
-        if key not in names:
+        if check_keys and key not in names:
             raise unknown_key_error(key)
-        try:
-            value = json.loads(raw)
-        except json.JSONDecodeError:
-            value = raw
-            if key in ("hidden_sizes", "disc_hidden"):
-                try:
-                    value = [int(x) for x in raw.split(",")]
-                except ValueError:
-                    raise ConfigError(f"--set {key}={raw!r} is not a comma-separated list of integers") from None
-        out[key] = value
+        out[key] = _parse_value(key, raw, error)
     return out
+
+
+def _parse_value(key: str, raw: str, error: type[ConfigError]) -> Any:
+    """One ``--set`` value: JSON, else YAML, else the string (a list of integers for :data:`_INT_LIST_FIELDS`)."""
+    import yaml
+
+    try:
+        return json.loads(raw)
+    except json.JSONDecodeError:
+        pass
+    try:
+        value = load_yaml(raw)
+    except yaml.YAMLError:
+        value = raw
+    except Exception as exc:  # noqa: BLE001 - an alias bomb or a recursive value
+        raise error(f"--set {key}: {_parse_problem(exc)}") from None
+    if isinstance(value, str) and key in _INT_LIST_FIELDS:
+        try:
+            return [int(x) for x in raw.split(",")]
+        except ValueError:
+            raise error(f"--set {key}={raw!r} is not a comma-separated list of integers") from None
+    return value
+
+
+def parse_overrides(items: Sequence[str] | None) -> dict[str, Any]:
+    """The config overrides of a command's ``--set``: :func:`parse_set` with every KEY checked."""
+    return parse_set(items, check_keys=True)
 
 
 def _parse_problem(exc: Exception) -> str:

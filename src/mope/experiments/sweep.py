@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from mope.config import Config, _parse_problem, load_yaml, read_text_file
+from mope.config import parse_set as parse_set_items
 from mope.errors import ConfigError, short_repr, suggest
 from mope.experiments.jobs import Job, JobError, check_backend, check_job_folders, run_jobs
 from mope.experiments.locks import FolderLock
@@ -478,22 +479,8 @@ def _json_default(x: Any) -> Any:
 # command line
 # ------------------------------------------------------------------------------------------------------------
 def parse_set(items: Sequence[str] | None) -> dict[str, Any]:
-    """``KEY=VALUE`` pairs; VALUE is read as YAML (numbers, lists, true/false, null), else kept as a string."""
-    import yaml
-
-    out: dict[str, Any] = {}
-    for item in items or ():
-        if "=" not in item:
-            raise SweepError(f"--set '{item}' is not KEY=VALUE")
-        key, raw = item.split("=", 1)
-        key = key.strip().replace("-", "_")
-        try:
-            out[key] = load_yaml(raw)
-        except yaml.YAMLError:
-            out[key] = raw
-        except Exception as exc:  # noqa: BLE001 - an alias bomb or a recursive value
-            raise SweepError(f"--set {key}: {_parse_problem(exc)}") from None
-    return out
+    """A sweep's ``--set`` pairs: :func:`mope.config.parse_set` (keys are checked by :func:`apply_overrides`)."""
+    return parse_set_items(items, error=SweepError)
 
 
 def sweep_command(spec_path: str | Path, out: str | Path | None = None, backend: str = "local",

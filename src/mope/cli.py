@@ -5,9 +5,11 @@ Every bad input ends in one line ``error: ...`` on stderr and exit code 2, never
 
 from __future__ import annotations
 
+import functools
 import json
 import sys
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -23,6 +25,28 @@ app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_
 def _fail(message: str) -> None:
     typer.echo(f"error: {one_line(message)}", err=True)
     raise typer.Exit(2)
+
+
+RESUME_HINT = "run the same command again to resume"
+
+
+def handles_errors(interrupted: str | None = None) -> Callable[[Callable[..., None]], Callable[..., None]]:
+    """The one error handling of the commands: a :class:`MopeError` is one ``error:`` line and exit code 2; with
+    ``interrupted``, Ctrl-C prints ``interrupted; <interrupted>`` and exits with 130."""
+    def wrap(command: Callable[..., None]) -> Callable[..., None]:
+        @functools.wraps(command)
+        def run(*args: Any, **kwargs: Any) -> None:
+            try:
+                command(*args, **kwargs)
+            except MopeError as exc:
+                _fail(str(exc))
+            except KeyboardInterrupt:
+                if interrupted is None:
+                    raise
+                typer.echo(f"\ninterrupted; {interrupted}", err=True)
+                raise typer.Exit(130) from None
+        return run
+    return wrap
 
 
 def quiet_media() -> None:
@@ -49,6 +73,7 @@ def _train_help() -> str:
 
 
 @app.command(help=_train_help())
+@handles_errors()
 def train(
     env: Annotated[str | None, typer.Option(help=f"Environment id \\[default: {_default('env_id')}]")] = None,
     algo: Annotated[str | None, typer.Option(help=f"Variant: {', '.join(ALGOS)} \\[default: mope]")] = None,
@@ -100,9 +125,6 @@ def train(
         cfg = _config_from_cli(config, algo, flags, set_ or [], preset)
         run_dir = out or Path("runs") / f"{cfg.env_id}-{cfg.algo}-s{cfg.seed}"
         result = train_run(cfg, run_dir, progress=progress, overwrite=overwrite)
-    except MopeError as exc:
-        _fail(str(exc))
-        return
     except KeyboardInterrupt:
         _interrupted(run_dir)
     _print_final(cfg, result)
@@ -190,6 +212,7 @@ def _print_metrics(res: dict[str, float]) -> None:
 
 
 @app.command("eval")
+@handles_errors()
 def eval_(
     run_or_checkpoint: Annotated[Path, typer.Argument(help="A run folder or a checkpoint file.")],
     prefs: Annotated[int, typer.Option(help="Number of uniform preferences.")] = 2000,
@@ -201,21 +224,18 @@ def eval_(
     from mope.evaluation.evaluator import MAX_EVAL_PREFS
     from mope.experiments.runs import evaluate_checkpoint, resolve_checkpoint
 
-    try:
-        ckpt = resolve_checkpoint(run_or_checkpoint)
-        target = out or ckpt.parent / f"{ckpt.stem}_solutions_{prefs}.csv"
-        if 20_000 <= prefs <= MAX_EVAL_PREFS:
-            typer.echo(f"note: evaluating {prefs} preferences (the paper uses 2000) takes a while", err=True)
-        res, _ = evaluate_checkpoint(ckpt, prefs, seed, target, device)
-    except MopeError as exc:
-        _fail(str(exc))
-        return
+    ckpt = resolve_checkpoint(run_or_checkpoint)
+    target = out or ckpt.parent / f"{ckpt.stem}_solutions_{prefs}.csv"
+    if 20_000 <= prefs <= MAX_EVAL_PREFS:
+        typer.echo(f"note: evaluating {prefs} preferences (the paper uses 2000) takes a while", err=True)
+    res, _ = evaluate_checkpoint(ckpt, prefs, seed, target, device)
     typer.echo(f"checkpoint: {ckpt}")
     _print_metrics(res)
     typer.echo(f"solutions: {target}")
 
 
 @app.command()
+@handles_errors()
 def act(
     checkpoint: Annotated[Path, typer.Argument(help="A run folder or a checkpoint file.")],
     pref: Annotated[str, typer.Option(help="Preference, e.g. 0.3,0.7.")],
@@ -229,18 +249,13 @@ def act(
     from mope.experiments.runs import load_agent, play
     from mope.preferences import validate_preference
 
-    try:
-        if video is not None:
-            agent = load_agent(checkpoint, device)
-            w = validate_preference(pref, agent.m)
-            rec = record_video(agent, agent.config.env_id, w, video, seed=seed,
-                               max_steps=agent.config.max_episode_steps)
-            outcome = f", outcome: {rec['outcome']}" if rec.get("outcome") else ""
-            typer.echo(f"video: {rec['path']} ({rec['frames']} frames{outcome})")
-        sols = play(checkpoint, pref, device, seed)
-    except MopeError as exc:
-        _fail(str(exc))
-        return
+    if video is not None:
+        agent = load_agent(checkpoint, device)
+        w = validate_preference(pref, agent.m)
+        rec = record_video(agent, agent.config.env_id, w, video, seed=seed, max_steps=agent.config.max_episode_steps)
+        outcome = f", outcome: {rec['outcome']}" if rec.get("outcome") else ""
+        typer.echo(f"video: {rec['path']} ({rec['frames']} frames{outcome})")
+    sols = play(checkpoint, pref, device, seed)
     fmt = ", ".join
     typer.echo(f"preference: [{fmt(f'{x:.4g}' for x in sols.prefs[0])}]")
     typer.echo(f"return: [{fmt(f'{x:.4g}' for x in sols.returns[0])}]")
@@ -249,6 +264,7 @@ def act(
 
 
 @app.command()
+@handles_errors()
 def diagnose(
     run_or_checkpoint: Annotated[Path, typer.Argument(help="A run folder or a checkpoint file.")],
     prefs: Annotated[int, typer.Option(help="Equally spaced preferences.")] = 101,
@@ -259,15 +275,11 @@ def diagnose(
     from mope.evaluation.diagnose import diagnose as run_diagnosis
     from mope.experiments.runs import load_agent, resolve_checkpoint
 
-    try:
-        if prefs < 1:
-            raise ConfigError(f"--prefs {prefs} is out of range: must be >= 1")
-        ckpt = resolve_checkpoint(run_or_checkpoint)
-        agent = load_agent(ckpt, device)
-        res = run_diagnosis(agent, agent.env, agent.config.gamma, prefs)
-    except MopeError as exc:
-        _fail(str(exc))
-        return
+    if prefs < 1:
+        raise ConfigError(f"--prefs {prefs} is out of range: must be >= 1")
+    ckpt = resolve_checkpoint(run_or_checkpoint)
+    agent = load_agent(ckpt, device)
+    res = run_diagnosis(agent, agent.env, agent.config.gamma, prefs)
     if as_json:
         typer.echo(json.dumps({"checkpoint": str(ckpt), **res}, indent=2))
         return
@@ -281,6 +293,7 @@ app.add_typer(reproduce_app, name="reproduce")
 
 
 @reproduce_app.command("dst")
+@handles_errors(interrupted=RESUME_HINT)
 def reproduce_dst_cmd(
     out: Annotated[Path, typer.Option(help="Output folder (runs, figures, table).")] = Path("runs/reproduce-dst"),
     seeds: Annotated[str, typer.Option(help="Seeds per variant: N (0..N-1; the paper-scale run: 10), a range 5-9 "
@@ -299,23 +312,16 @@ def reproduce_dst_cmd(
     """Fig. 2 and Fig. 3 of the paper on Deep-Sea-Treasure: four variants x seeds, figures and a table."""
     from mope.paper.dst import reproduce_dst
 
-    try:
-        res = reproduce_dst(out, seeds=seeds, steps=steps, eval_every=eval_every,
-                            algos=tuple(a.strip() for a in algos.split(",") if a.strip()), workers=workers, env_id=env,
-                            progress=progress,
-                            **{**parse_overrides(set_ or []), **({"device": device} if device else {})})
-    except MopeError as exc:
-        _fail(str(exc))
-        return
-    except KeyboardInterrupt:
-        typer.echo("\ninterrupted; run the same command again to resume", err=True)
-        raise typer.Exit(130) from None
+    res = reproduce_dst(out, seeds=seeds, steps=steps, eval_every=eval_every,
+                        algos=tuple(a.strip() for a in algos.split(",") if a.strip()), workers=workers, env_id=env,
+                        progress=progress, **{**parse_overrides(set_), **({"device": device} if device else {})})
     typer.echo(res["table"])
     typer.echo(f"figures and table in {res['out']} (this invocation trained for {res['train_wall_s']:.0f} s; "
                f"the runs' own wall times sum to {res['runs_wall_s']:.0f} s)")
 
 
 @reproduce_app.command("confrontation")
+@handles_errors(interrupted=RESUME_HINT)
 def reproduce_confrontation_cmd(
     out: Annotated[Path, typer.Option(help="Output folder (runs, figures, table).")] = Path(
         "runs/reproduce-confrontation"),
@@ -335,22 +341,16 @@ def reproduce_confrontation_cmd(
     """Fig. 5 and Fig. 6 of the paper on the robot confrontation game: PPO x K, EQL and MoPE; figures and a table."""
     from mope.paper.confrontation import reproduce_confrontation
 
-    try:
-        res = reproduce_confrontation(out, seeds=seeds, steps=steps, ppo_prefs=ppo_prefs, eval_prefs=eval_prefs,
-                                      episodes=episodes, workers=workers, progress=progress, ppo_budget=ppo_budget,
-                                      device=device, **parse_overrides(set_ or []))
-    except MopeError as exc:
-        _fail(str(exc))
-        return
-    except KeyboardInterrupt:
-        typer.echo("\ninterrupted; run the same command again to resume", err=True)
-        raise typer.Exit(130) from None
+    res = reproduce_confrontation(out, seeds=seeds, steps=steps, ppo_prefs=ppo_prefs, eval_prefs=eval_prefs,
+                                  episodes=episodes, workers=workers, progress=progress, ppo_budget=ppo_budget,
+                                  device=device, **parse_overrides(set_))
     typer.echo(res["table"])
     typer.echo(f"figures and table in {res['out']} (training {res['train_wall_s']:.0f} s, "
                f"evaluation {res['eval_wall_s']:.0f} s)")
 
 
 @app.command()
+@handles_errors(interrupted="running trials saved their state: run the same command again to resume")
 def sweep(
     spec: Annotated[Path, typer.Argument(help="YAML sweep spec (see examples/sweep-dst.yaml).")],
     backend: Annotated[str, typer.Option(help="local (processes) or ray.")] = "local",
@@ -365,19 +365,13 @@ def sweep(
     """Run a grid of trainings; re-running skips finished trials and resumes interrupted ones."""
     from mope.experiments.sweep import sweep_command
 
-    try:
-        results = sweep_command(spec, out, backend, address, workers, set_, seeds, progress)
-    except MopeError as exc:
-        _fail(str(exc))
-        return
-    except KeyboardInterrupt:
-        typer.echo("\ninterrupted; running trials saved their state: run the same command again to resume", err=True)
-        raise typer.Exit(130) from None
+    results = sweep_command(spec, out, backend, address, workers, set_, seeds, progress)
     if any(r.status == "failed" for r in results):
         raise typer.Exit(1)
 
 
 @app.command()
+@handles_errors(interrupted=RESUME_HINT)
 def benchmark(
     out: Annotated[Path, typer.Option(help="Folder of the runs (and of the report, unless --report-dir).")] = Path(
         "runs/benchmark"),
@@ -402,20 +396,14 @@ def benchmark(
     def split(text: str | None) -> list[str] | None:
         return [x.strip() for x in text.split(",") if x.strip()] if text else None
 
-    try:
-        res = run_benchmark(out, split(envs), split(methods), seeds, quick, steps, workers, backend, address,
-                            report_dir, progress, command="mope " + " ".join(sys.argv[1:]))
-    except MopeError as exc:
-        _fail(str(exc))
-        return
-    except KeyboardInterrupt:
-        typer.echo("\ninterrupted; run the same command again to resume", err=True)
-        raise typer.Exit(130) from None
+    res = run_benchmark(out, split(envs), split(methods), seeds, quick, steps, workers, backend, address,
+                        report_dir, progress, command="mope " + " ".join(sys.argv[1:]))
     typer.echo(res["table"])
     typer.echo(f"table and figures in {res['out']} ({res['wall_s']:.0f} s)")
 
 
 @app.command()
+@handles_errors()
 def report(
     runs_dir: Annotated[Path, typer.Argument(help="Sweep folder or any folder of runs.")],
     out: Annotated[Path | None, typer.Option(help="Output folder (default RUNS_DIR/report).")] = None,
@@ -425,10 +413,7 @@ def report(
     """Aggregate runs across seeds: table (mean, std, bootstrap 95% CI, IQM), curves and fronts."""
     from mope.experiments.report import report_command
 
-    try:
-        report_command(runs_dir, out, split_mismatched)
-    except MopeError as exc:
-        _fail(str(exc))
+    report_command(runs_dir, out, split_mismatched)
 
 
 @app.command()

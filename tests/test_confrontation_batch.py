@@ -1,4 +1,4 @@
-"""The batched Robot Confrontation Game equals the single game, step for step (issue 14)."""
+"""The batched Robot Confrontation Game equals the single game, step for step."""
 
 from __future__ import annotations
 

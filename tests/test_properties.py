@@ -1,4 +1,4 @@
-"""Property-based tests (hypothesis) of the preference utilities, the metrics and the sum tree (issue 7, part 4).
+"""Property-based tests (hypothesis) of the preference utilities, the metrics and the sum tree.
 
 This file is the one home of every property below; the example-based tests of the same modules stay in
 test_preferences.py, test_metrics.py and test_replay.py.

@@ -1,4 +1,4 @@
-"""Resumable training: a resumed run equals an uninterrupted one, step for step (issue 5 and 7).
+"""Resumable training: a resumed run equals an uninterrupted one, step for step.
 
 Covers: agent-level save/load mid-episode; ``mope train`` stopped by SIGINT, SIGTERM and SIGKILL, then
 ``mope train --resume``; the run folder's resume bookkeeping (status, config mismatch, finished runs).

@@ -1,4 +1,4 @@
-"""Issue 7, parts 1 and 2: every guarded input, from the Python API and from the CLI.
+"""Input validation: every guarded input, from the Python API and from the CLI.
 
 Each bad input must raise a :class:`mope.MopeError` subclass whose one-line message names the bad value and what
 is allowed (API), and make the CLI exit with code 2 after one ``error: ...`` line and no traceback. The CLI cases
@@ -28,7 +28,7 @@ Case -> tests (``here`` = this file; tests elsewhere by file::name):
   test_discrete_actions_wrapper_makes_it_usable; CLI: test_cli (mo-mountaincarcontinuous-v0).
 * missing output folder (created) -- test_checkpoint::test_save_creates_parent_folders_and_overwrites, here:
   test_api_missing_output_folder_is_created.
-* unwritable output folder -- API: test_experiments::test_output_folder_that_cannot_be_created_is_named, here:
+* unwritable output folder -- API: test_run_folders::test_output_folder_that_cannot_be_created_is_named, here:
   test_api_unwritable_output (Config.save, MoPE.save), test_api_read_only_output_folder (chmod; skipped as
   root); CLI: here: test_cli_unwritable_out.
 * checkpoint carries format version, package version and config; read with weights_only=True --

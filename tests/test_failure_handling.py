@@ -1,6 +1,6 @@
-"""Issue 32: nothing lost on a typo, no input hangs the tool, every failure is one line.
+"""Failure handling: nothing lost on a typo, no input hangs the tool, every failure is one line.
 
-Each test reproduces one case of the issue and fails on the code before the fix: a failed ``--overwrite`` leaves
+Each test reproduces one failure case: a failed ``--overwrite`` leaves
 the old run byte for byte, YAML alias bombs are refused at once, and every other failure is one ``error:`` line,
 exit code 2, no traceback.
 """

@@ -321,3 +321,22 @@ def test_parse_overrides_refuses_bad_items_by_name(items: list[str], message: st
 
     with pytest.raises(ConfigError, match=message):
         parse_overrides(items)
+
+
+def test_one_set_parser_serves_train_and_sweep() -> None:
+    """JSON first (``1e-3`` is a number, which YAML 1.1 would keep as a string), then YAML (flow lists), else the
+    string; a sweep's ``--set`` reads values the same way and checks its keys itself."""
+    from mope.config import parse_set
+    from mope.experiments.sweep import SweepError
+    from mope.experiments.sweep import parse_set as sweep_parse_set
+
+    items = ["learning_rate=1e-3", "hidden_sizes=[8, 8]", "disc_hidden=16,16", "q_head=convex", "target_tau=null",
+             "seed=[0, 1]", "envelope_prefs=[relabel, own]"]
+    want = {"learning_rate": 1e-3, "hidden_sizes": [8, 8], "disc_hidden": [16, 16], "q_head": "convex",
+            "target_tau": None, "seed": [0, 1], "envelope_prefs": ["relabel", "own"]}
+    assert parse_set(items) == sweep_parse_set(items) == want
+    with pytest.raises(SweepError, match="is not KEY=VALUE"):
+        sweep_parse_set(["oops"])
+    assert parse_set(["totl_steps=3"]) == {"totl_steps": 3}  # keys are checked by the caller ...
+    with pytest.raises(ConfigError, match="totl_steps"):
+        parse_set(["totl_steps=3"], check_keys=True)  # ... or here

@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from mope.config import Config
-from mope.experiments.report import ReportError, aggregate, bootstrap_ci, find_runs, iqm, report
+from mope.experiments.report import ReportError, find_runs, report
 from mope.experiments.runs import METRIC_COLUMNS
+from mope.experiments.stats import aggregate, bootstrap_ci, iqm
 
 # final (step 300) values per algorithm and seed: cr, hv, eum, optimal_share, timeout_share
 FINAL = {

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from mope.errors import MopeError, is_disk_full, short_repr
-from mope.experiments.stats import MetricStats, aggregate, bootstrap_ci
+from mope.experiments.stats import MetricStats, aggregate, bootstrap_ci, iqm  # noqa: F401 - iqm: read here before
 
 DEFAULT_METRICS = ("cr", "igd", "hv", "eum", "optimal_share", "timeout_share", "path_error", "overestimation",
                    "win_share", "out_share")

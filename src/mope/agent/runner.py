@@ -9,28 +9,49 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import gymnasium as gym
 
+from mope.config import Config
 from mope.errors import MopeError
 
 if TYPE_CHECKING:
-    from mope.agent.agent import MoPE
     from mope.evaluation.evaluator import Evaluator
+
+
+class Agent(Protocol):
+    """What the loop and the callbacks use of an agent (:class:`mope.agent.agent.MoPE` is one): they are typed on
+    this, so the loop needs nothing of the agent's module."""
+
+    config: Config
+    global_step: int
+    wall_s: float
+    eval_seconds: float
+    epsilon: float
+    buffer: Any
+    last_solutions: Any
+
+    def collect_step(self) -> None: ...
+
+    def learn_step(self) -> dict[str, float] | None: ...
+
+    def end_step(self) -> None: ...
+
+    def pretrain(self) -> Any: ...
 
 
 class Callback:
     """Hooks of :func:`train`. Return False from :meth:`on_step` to stop training at that step boundary."""
 
-    def on_training_start(self, agent: MoPE, total_steps: int) -> None:
+    def on_training_start(self, agent: Agent, total_steps: int) -> None:
         """Before the first step of a :func:`train` call."""
 
-    def on_step(self, agent: MoPE, stats: dict[str, float] | None) -> bool:
+    def on_step(self, agent: Agent, stats: dict[str, float] | None) -> bool:
         """After each environment step, its updates (``stats`` of the last one, or None) and housekeeping."""
         return True
 
-    def on_training_end(self, agent: MoPE, stopped: bool) -> None:
+    def on_training_end(self, agent: Agent, stopped: bool) -> None:
         """After the last step; ``stopped`` when a callback ended training early."""
 
 
@@ -40,17 +61,17 @@ class CallbackList(Callback):
     def __init__(self, callbacks: Sequence[Callback]) -> None:
         self.callbacks = [c for c in callbacks if c is not None]
 
-    def on_training_start(self, agent: MoPE, total_steps: int) -> None:
+    def on_training_start(self, agent: Agent, total_steps: int) -> None:
         for c in self.callbacks:
             c.on_training_start(agent, total_steps)
 
-    def on_step(self, agent: MoPE, stats: dict[str, float] | None) -> bool:
+    def on_step(self, agent: Agent, stats: dict[str, float] | None) -> bool:
         keep_going = True
         for c in self.callbacks:
             keep_going = c.on_step(agent, stats) and keep_going
         return keep_going
 
-    def on_training_end(self, agent: MoPE, stopped: bool) -> None:
+    def on_training_end(self, agent: Agent, stopped: bool) -> None:
         for c in self.callbacks:
             c.on_training_end(agent, stopped)
 
@@ -66,7 +87,7 @@ def as_callback(callback: Callback | Sequence[Callback] | None) -> Callback:
     raise MopeError(f"callback {callback!r} is not a mope.agent.runner.Callback (or a list of them)")
 
 
-def train(agent: MoPE, total_steps: int, callback: Callback | Sequence[Callback] | None = None) -> bool:
+def train(agent: Agent, total_steps: int, callback: Callback | Sequence[Callback] | None = None) -> bool:
     """Run ``total_steps`` environment steps of ``agent``, continuing from ``agent.global_step``.
 
     One step: :meth:`~mope.agent.agent.MoPE.collect_step` (act, step the ``n_envs`` environments, store their
@@ -103,14 +124,14 @@ def train(agent: MoPE, total_steps: int, callback: Callback | Sequence[Callback]
     return not stopped
 
 
-def crossed_now(agent: MoPE, every: int) -> bool:
+def crossed_now(agent: Agent, every: int) -> bool:
     """Whether the step just taken (``n_envs`` env steps) passed a multiple of ``every`` env steps: what the
     callbacks' "every N steps" means with several environments."""
     step, n = agent.global_step, agent.config.n_envs
     return step // every > (step - n) // every
 
 
-def wall_seconds(agent: MoPE) -> float:
+def wall_seconds(agent: Agent) -> float:
     """Training wall seconds so far, the current :func:`train` call included."""
     started = getattr(agent, "train_started", None)
     return agent.wall_s + (time.perf_counter() - started if started is not None else 0.0)
@@ -126,7 +147,7 @@ class EvalCallback(Callback):
     """
 
     def __init__(self, evaluator: Evaluator, every: int,
-                 on_record: Callable[[MoPE, dict[str, float]], None] | None = None) -> None:
+                 on_record: Callable[[Agent, dict[str, float]], None] | None = None) -> None:
         self.evaluator = evaluator
         self.every = every
         self.on_record = on_record
@@ -134,7 +155,7 @@ class EvalCallback(Callback):
         #: Seconds spent evaluating (the training wall time includes them).
         self.seconds = 0.0
 
-    def evaluate(self, agent: MoPE) -> dict[str, float]:
+    def evaluate(self, agent: Agent) -> dict[str, float]:
         t0 = time.perf_counter()
         train_s = wall_seconds(agent) - agent.eval_seconds  # training only, up to this evaluation
         res, agent.last_solutions = self.evaluator.evaluate(agent)
@@ -147,12 +168,12 @@ class EvalCallback(Callback):
             self.on_record(agent, rec)
         return rec
 
-    def on_step(self, agent: MoPE, stats: dict[str, float] | None) -> bool:
+    def on_step(self, agent: Agent, stats: dict[str, float] | None) -> bool:
         if self.every and crossed_now(agent, self.every):
             self.evaluate(agent)
         return True
 
-    def on_training_end(self, agent: MoPE, stopped: bool) -> None:
+    def on_training_end(self, agent: Agent, stopped: bool) -> None:
         if not stopped and (not self.records or self.records[-1]["step"] != agent.global_step):
             self.evaluate(agent)
 
@@ -166,14 +187,14 @@ class ProgressBar(Callback):
         self.bar: Any = None
         self._shown = 0
 
-    def on_training_start(self, agent: MoPE, total_steps: int) -> None:
+    def on_training_start(self, agent: Agent, total_steps: int) -> None:
         from tqdm.auto import tqdm
 
         c = agent.config
         self.bar = tqdm(total=total_steps, desc=self.desc or f"{c.algo} {c.env_id}", unit="step",
                         dynamic_ncols=True, mininterval=0.5)
 
-    def on_step(self, agent: MoPE, stats: dict[str, float] | None) -> bool:
+    def on_step(self, agent: Agent, stats: dict[str, float] | None) -> bool:
         self.bar.update(agent.config.n_envs)
         records = self.eval_callback.records if self.eval_callback is not None else []
         if len(records) != self._shown:
@@ -181,7 +202,7 @@ class ProgressBar(Callback):
             self.bar.set_postfix(cr=f"{records[-1]['cr']:.3f}", eum=f"{records[-1]['eum']:.2f}", refresh=False)
         return True
 
-    def on_training_end(self, agent: MoPE, stopped: bool) -> None:
+    def on_training_end(self, agent: Agent, stopped: bool) -> None:
         self.bar.close()
 
 
@@ -191,7 +212,7 @@ class StopWhen(Callback):
     def __init__(self, predicate: Callable[[], bool]) -> None:
         self.predicate = predicate
 
-    def on_step(self, agent: MoPE, stats: dict[str, float] | None) -> bool:
+    def on_step(self, agent: Agent, stats: dict[str, float] | None) -> bool:
         return not self.predicate()
 
 
@@ -208,7 +229,7 @@ class IntervalStats(Callback):
         self._sums: dict[str, float] = {}
         self._count = 0
 
-    def on_step(self, agent: MoPE, stats: dict[str, float] | None) -> bool:
+    def on_step(self, agent: Agent, stats: dict[str, float] | None) -> bool:
         if stats:
             self._count += 1
             for k, v in stats.items():
@@ -221,7 +242,7 @@ class IntervalStats(Callback):
         return True
 
 
-def train_with_evaluation(agent: MoPE, total_timesteps: int | None = None, eval_env: gym.Env | None = None,
+def train_with_evaluation(agent: Agent, total_timesteps: int | None = None, eval_env: gym.Env | None = None,
                           eval_every: int | None = None, callback: Any = None, progress: bool = False
                           ) -> list[dict[str, float]]:
     """What :meth:`mope.agent.agent.MoPE.train` does: :func:`train` with evaluation and a progress bar as callbacks."""

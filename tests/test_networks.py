@@ -279,3 +279,35 @@ def test_convex_double_q_values_equal_the_general_path():
     torch.testing.assert_close(values, expect)
     torch.testing.assert_close(greedy, torch.einsum("xim,xiam->xia", prefs, q_on).argmax(dim=2))
     assert len(set(greedy.flatten().tolist())) > 1
+
+
+def test_select_one_is_select_at_the_taken_action_and_trains_the_same_component() -> None:
+    torch.manual_seed(0)
+    v = torch.randn(16, 1, 5, 7, 3, requires_grad=True)
+    prefs = torch.distributions.Dirichlet(torch.ones(3)).sample((16, 9))
+    actions = torch.randint(0, 5, (16,))
+    want = ConvexQNetwork.select(v, prefs)[:, 0][torch.arange(16), :, actions]  # (16, 9, 3)
+    got = ConvexQNetwork.select_one(v[torch.arange(16), 0, actions], prefs)
+    assert torch.equal(got, want)
+    grad_want, = torch.autograd.grad(want.sum(), v)
+    grad_got, = torch.autograd.grad(got.sum(), v)
+    assert torch.allclose(grad_got, grad_want) and (grad_got != 0).sum() == (grad_want != 0).sum()
+
+
+def test_the_fast_double_q_target_equals_the_general_envelope_target(monkeypatch) -> None:
+    """The default target (convex head, double Q, no envelope) takes a one-pass path; it must give the numbers of
+    the general path (forward_prefs of both networks, then losses.envelope_target)."""
+    from mope import make_agent, targets
+
+    agent = make_agent("mope", "deep-sea-treasure-v0", seed=3, eval_every=0, checkpoint_every=0, learning_starts=50)
+    agent.train(400)
+    c = agent.config
+    batch = agent.buffer.sample(c.batch_size, agent.rng, 0.5)
+    w = torch.as_tensor(agent.relabel(batch.prefs), dtype=torch.float32)
+    acting = torch.as_tensor(batch.prefs, dtype=torch.float32)
+    assert targets._one_pass(agent.q_net, c)
+    fast = targets.one_step_target(agent.q_net, agent.target_net, agent.buffer, batch.indices, w, acting, c)
+    monkeypatch.setattr(targets, "_one_pass", lambda q_net, cfg: False)
+    general = targets.one_step_target(agent.q_net, agent.target_net, agent.buffer, batch.indices, w, acting, c)
+    assert fast.shape == general.shape == w.shape
+    assert torch.allclose(fast, general, atol=1e-5)

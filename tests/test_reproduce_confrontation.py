@@ -146,27 +146,41 @@ def test_confrontation_seeds_take_a_count_a_range_or_a_list() -> None:
         seeds, ppo_steps = check_confrontation_args(given, 1000, 2, 3, 2, 1, "each")
         assert seeds == want and ppo_steps == 1000
     names = [j.name for j in confrontation_jobs([5], 1000, 2, 1000, 3, "cpu", {})]
-    assert names == ["eql-s5", "mope-s5", "ppo-s5-pref00", "ppo-s5-pref01"]
+    assert names == ["eql-s5", "mope-nodemo-s5", "mope-s5", "ppo-s5-pref00", "ppo-s5-pref01"]
+    configs = {j.name: j.payload for j in confrontation_jobs([5], 1000, 2, 1000, 3, "cpu", {})}
+    # every agent starts from the game's defaults; only "mope" keeps their demonstrations
+    assert {configs[n]["n_envs"] for n in ("eql-s5", "mope-nodemo-s5", "mope-s5")} == {8}
+    assert (configs["mope-s5"]["demos"], configs["mope-nodemo-s5"]["demos"], configs["eql-s5"]["demos"]) == \
+        ("scripted", "", "")
+    assert not configs["eql-s5"]["experience_exploration"] and configs["mope-nodemo-s5"]["experience_exploration"]
 
 
 @pytest.mark.slow
 def test_reproduce_confrontation_tiny(tmp_path) -> None:
     r = reproduce_confrontation(tmp_path, steps=250, ppo_prefs=2, eval_prefs=3, episodes=2, workers=1,
-                                progress=False, n_omega=4, learning_starts=100)
+                                progress=False, n_omega=4, learning_starts=100, demo_episodes=2)
     for name in ("fig5_front.png", "fig6_trajectories.png", "table.md", "results.json"):
         assert (tmp_path / name).is_file()
     res = json.loads((tmp_path / "results.json").read_text())["results"]
-    assert set(res) == {"ppo", "eql", "mope", "scripted pursuer", "leave the arena", "pure pursuit", "random",
-                        "reference_front_hv"}
+    assert set(res) == {"ppo", "eql", "mope-nodemo", "mope", "scripted pursuer", "leave the arena", "pure pursuit",
+                        "random", "reference_front_hv"}
     assert res["leave the arena"]["out"]["mean"] > 0.9  # 2 initial states: too few for the pursuer's win rate
     assert "| reference: scripted pursuer |" in r["table"] and res["reference_front_hv"] > 0
-    for m, n_sol in (("ppo", 2), ("eql", 3), ("mope", 3)):
+    for m, n_sol in (("ppo", 2), ("eql", 3), ("mope-nodemo", 3), ("mope", 3)):
         rates = sum(res[m][k]["mean"] for k in ("win", "loss", "out", "blue_out", "timeout"))
         assert rates == pytest.approx(1.0) and res[m]["solutions"] == n_sol
+        # the acceptance scores: utilities against the same references' envelope, shares in [0, 1]
+        assert res[m]["eu_envelope"]["mean"] == pytest.approx(res["scripted pursuer"]["eu_envelope"]["mean"])
+        assert res[m]["eu_gap"]["mean"] == pytest.approx(res[m]["eu"]["mean"] - res[m]["eu_envelope"]["mean"])
+        assert 0 <= res[m]["win_hi"]["mean"] <= 1 and 0 <= res[m]["out_lo_max"]["mean"] <= 1
+    # the envelope is the best reference at each preference, so no reference is above it
+    for name in ("scripted pursuer", "leave the arena", "pure pursuit", "random"):
+        assert res[name]["eu_gap"]["mean"] <= 1e-9
+    assert "MoPE alone (the paper's method)" in r["table"] and "EU - references' envelope" in r["table"]
     assert "| mope | 1 x 3 |" in r["table"]
     # a second call reuses every finished run
     again = reproduce_confrontation(tmp_path, steps=250, ppo_prefs=2, eval_prefs=3, episodes=2, workers=1,
-                                    progress=False, n_omega=4, learning_starts=100)
+                                    progress=False, n_omega=4, learning_starts=100, demo_episodes=2)
     assert again["train_wall_s"] < r["train_wall_s"]
 
 

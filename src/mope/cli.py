@@ -330,15 +330,15 @@ def reproduce_confrontation_cmd(
                      ] = 15_000,
     ppo_prefs: Annotated[int, typer.Option(help="K preferences, one PPO policy each.")] = 11,
     eval_prefs: Annotated[int, typer.Option(help="Uniform preferences for EQL and MoPE.")] = 100,
-    episodes: Annotated[int, typer.Option(help="Evaluation episodes per preference.")] = 5,
+    episodes: Annotated[int, typer.Option(help="Evaluation episodes per preference: the common start states.")] = 100,
     ppo_budget: Annotated[str, typer.Option(help="each: every PPO policy gets --steps; shared: they split it.")
                           ] = "each",
     workers: Annotated[int, typer.Option(help="Parallel training processes.")] = 2,
-    set_: Annotated[list[str] | None, typer.Option("--set", help="Config override for EQL/MoPE: KEY=VALUE.")] = None,
+    set_: Annotated[list[str] | None, typer.Option("--set", help="Config override for the agents: KEY=VALUE.")] = None,
     device: Annotated[str, typer.Option(help="cpu, cuda or auto.")] = "cpu",
     progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
 ) -> None:
-    """Fig. 5 and Fig. 6 of the paper on the robot confrontation game: PPO x K, EQL and MoPE; figures and a table."""
+    """Fig. 5 and Fig. 6 of the paper on the robot game: PPO x K, EQL, MoPE alone and MoPE with demonstrations."""
     from mope.paper.confrontation import reproduce_confrontation
 
     res = reproduce_confrontation(out, seeds=seeds, steps=steps, ppo_prefs=ppo_prefs, eval_prefs=eval_prefs,

@@ -348,21 +348,24 @@ class MoPE(BaseAgent):
         demonstrated preference (row 0)."""
         c = self.config
         heads = 1
+        with_margin = bool(self.buffer.reserved) and c.demo_loss_weight > 0
         if isinstance(self.q_net, ConvexQNetwork):  # every head learns the same targets (rows b*H + h)
             comps = self.q_net.components(obs)  # (B, H, A, C, m)
             heads = comps.shape[1]
-            q_all = self.q_net.select(comps, w).flatten(0, 1)  # (B*H, N, A, m)
+            taken = comps[torch.arange(len(actions)), :, actions].flatten(0, 1)  # (B*H, C, m): the taken action's
             actions, w, y, demo = (t.repeat_interleave(heads, dim=0) for t in (actions, w, y, demo))
-            q = losses.taken_action_q(q_all, actions)
-            comp_loss = losses.component_loss(comps.flatten(0, 1)[torch.arange(len(actions)), actions], y,
-                                              c.component_anchor_weight)
+            q = self.q_net.select_one(taken, w)  # (B*H, N, m)
+            comp_loss = losses.component_loss(taken, y, c.component_anchor_weight)
+            if with_margin:  # w^T Q(s, a, w) of every action at the demonstrated preference (row 0)
+                scalar = torch.einsum("bm,bacm->bac", w[:, 0], comps.flatten(0, 1)).amax(dim=2)
         else:
             q_all = self.q_net.forward_prefs(obs, w)
             q = losses.taken_action_q(q_all, actions)
             comp_loss = None
+            if with_margin:
+                scalar = torch.einsum("bam,bm->ba", q_all[:, 0], w[:, 0])
         margin = None
-        if self.buffer.reserved and c.demo_loss_weight > 0:
-            scalar = torch.einsum("bam,bm->ba", q_all[:, 0], w[:, 0])
+        if with_margin:
             margin = losses.large_margin_loss(scalar, actions, c.demo_margin, demo)
         if c.lb_homotopy_steps:  # Yang et al.'s homotopy: (1 - lambda) L^A + lambda L^B, lambda rising to lb_weight
             lam = c.lb_weight * min(1.0, self.global_step / c.lb_homotopy_steps)

@@ -27,12 +27,15 @@ def one_step_target(q_net: nn.Module, target_net: nn.Module, buffer: ReplayBuffe
     for double Q). ``(B, N, m)``, in the learner's units (rewards times ``reward_scale``)."""
     dev = w.device
     next_obs = _t(buffer.next_obs[idx], dev)
+    rewards = _t(buffer.rewards[idx], dev) * cfg.reward_scale
+    not_end = 1.0 - _t(buffer.terminated[idx], dev)[:, None, None]
+    if _one_pass(q_net, cfg):  # the default: the convex head's double-Q values straight from its components
+        values, _ = ConvexQNetwork.double_q_values(q_net.components(next_obs)[:, 0],
+                                                   target_net.components(next_obs)[:, 0], w)
+        return rewards.unsqueeze(1) + cfg.gamma * not_end * values
     env_prefs, envelope = losses.envelope_set(cfg.envelope_prefs, w, acting)
     q_next = target_net.forward_prefs(next_obs, env_prefs)
     q_select = q_net.forward_prefs(next_obs, env_prefs) if cfg.double_q else None
-    rewards = _t(buffer.rewards[idx], dev)
-    if cfg.reward_scale != 1.0:
-        rewards = rewards * cfg.reward_scale
     return losses.envelope_target(q_next, rewards, _t(buffer.terminated[idx], dev), w, cfg.gamma,
                                   q_select=q_select, envelope=envelope)
 
@@ -63,13 +66,18 @@ def n_step_target(q_net: nn.Module, target_net: nn.Module, buffer: ReplayBuffer,
     return losses.watkins_n_step_targets(rewards, values.view(b, n, rows, m), cont, cfg.gamma)
 
 
+def _one_pass(q_net: nn.Module, cfg: Config) -> bool:
+    """Whether eq. 4's target takes the convex head's fast path (:meth:`ConvexQNetwork.double_q_values`): one head,
+    double Q, no envelope (the defaults)."""
+    return isinstance(q_net, ConvexQNetwork) and q_net.n_critics == 1 and cfg.double_q and cfg.envelope_prefs == "own"
+
+
 def values_after(q_net: nn.Module, target_net: nn.Module, next_obs: torch.Tensor, w: torch.Tensor,
                  acting: torch.Tensor, cfg: Config, n: int) -> tuple[torch.Tensor, torch.Tensor]:
     """For the ``B x n`` states after each stored step (rows of one transition consecutive): eq. 4's value
     ``(B*n, N, m)`` (no termination mask) and the rows' greedy actions ``(B*n, N)`` under the online network."""
     w_rep = w.repeat_interleave(n, dim=0)
-    convex = isinstance(q_net, ConvexQNetwork) and q_net.n_critics == 1
-    if convex and cfg.double_q and cfg.envelope_prefs == "own":  # the default: one pass of each net, no select
+    if _one_pass(q_net, cfg):  # the default: one pass of each net, no select
         states, inverse = torch.unique(next_obs, dim=0, return_inverse=True)  # consecutive steps share states
         return ConvexQNetwork.double_q_values(q_net.components(states)[inverse, 0],
                                               target_net.components(states)[inverse, 0], w_rep)

@@ -1,25 +1,33 @@
 """``mope reproduce confrontation``: the paper's Robot Confrontation experiment (Fig. 5, Fig. 6) and a table.
 
-Trains, per seed, EQL and MoPE on ``mope/RobotConfrontationDiscrete-v0`` (one preference-conditioned agent
-each) and the outer-loop PPO baseline on ``mope/RobotConfrontation-v0`` (one policy per preference, K of them,
-on the scalarised reward ``w^T r`` through MO-Gymnasium's ``LinearReward``). Every run goes into its own folder
-and every run goes through the job runner (:mod:`mope.experiments.jobs`): a finished run is reused and an interrupted
-one resumes from its last checkpoint, locally or on Ray.
+Trains, per seed, three preference-conditioned agents on ``mope/RobotConfrontationDiscrete-v0`` -- ``mope``
+(the game's defaults, :data:`mope.config.ENV_DEFAULTS`: MoPE with scripted demonstrations and 8 envs),
+``mope-nodemo`` (the paper's method alone: the same without demonstrations) and ``eql`` (EQL, also without
+demonstrations, vectorised the same way) -- and the outer-loop PPO baseline on ``mope/RobotConfrontation-v0``
+(one policy per preference, K of them, on the scalarised reward ``w^T r`` through MO-Gymnasium's
+``LinearReward``). Every run goes into its own folder
+and every run goes through the job runner (:mod:`mope.experiments.jobs`): a finished run is reused and an
+interrupted one resumes from its last checkpoint, locally or on Ray.
 
-Budget (``steps``): EQL and MoPE get ``steps`` environment steps each. With ``ppo_budget="each"`` (default)
+Budget (``steps``): every agent gets ``steps`` environment steps. With ``ppo_budget="each"`` (default)
 every PPO policy also gets ``steps``, so each trained policy sees as much experience as the one EQL/MoPE
 agent (PPO as a whole uses K times more, as the paper's outer loop does); ``ppo_budget="shared"`` splits
 ``steps`` over the K policies (``steps // K`` each), so the three methods use the same total.
 
-Evaluation: EQL and MoPE under ``eval_prefs`` (100) equally spaced preferences, PPO with its K policies; each
-preference/policy plays ``episodes`` episodes from the same random initial states (reset seeds
-``10_000 + j``: common random numbers for every method and preference). A preference's solution is its mean
-undiscounted return vector. Written into the output folder:
+Evaluation: the agents under ``eval_prefs`` (100) equally spaced preferences, PPO with its K policies; each
+preference/policy plays ``episodes`` (100) episodes from the same random initial states (reset seeds
+``10_000 + j``: common random numbers for every method, preference and reference policy). A preference's
+solution is its mean undiscounted return vector. Beside Fig. 5's points, every seed is scored as the issue
+"the robot game, learned" asks (:func:`acceptance_scores`): outcome rates at w_catch = 1, 0.9, 0.8, 0.7 and the
+largest out-of-arena share at w_catch <= 0.5 (0, 0.1, ..., 0.5), and the mean *discounted* utility over the
+``eval_prefs`` preferences beside the reference policies' upper envelope (the best of the four at each
+preference). PPO's utility at a preference is its best policy's there (a set of policies, as for the
+references). Written into the output folder:
 
 * ``fig5_front.png`` -- every method's solutions in (r_catch, r_move) space and its Pareto front (dashed);
 * ``fig6_trajectories.png`` -- MoPE's games under 5 preferences from one initial state;
-* ``table.md`` and ``results.json`` -- per method: HV, win / loss / out-of-arena / time-out rates, strategy
-  diversity, mean returns, training wall time.
+* ``table.md`` and ``results.json`` -- per method: the scores above (mean over seeds, bootstrap 95 % CI), HV,
+  win / loss / out-of-arena / time-out rates, strategy diversity, mean returns, training wall time.
 
 Strategy diversity: a preference's *strategy* is the pair (its most frequent episode outcome, its speed class:
 mean speed below 1/3, between 1/3 and 2/3, or above 2/3 of ``v_max``). The table gives the number of distinct
@@ -43,14 +51,25 @@ from mope.errors import ConfigError, MopeError
 from mope.experiments.jobs import Job, run_jobs
 from mope.experiments.locks import FolderLock
 
-METHODS = ("ppo", "eql", "mope")
+METHODS = ("ppo", "eql", "mope-nodemo", "mope")
+#: The preference-conditioned agents and what each changes in the game's defaults (mope.config.ENV_DEFAULTS).
+LEARNERS: dict[str, tuple[str, dict[str, Any]]] = {
+    "eql": ("eql", {"demos": "", "demo_batch_share": 0.0}),
+    "mope-nodemo": ("mope", {"demos": "", "demo_batch_share": 0.0}),
+    "mope": ("mope", {}),
+}
+LABELS = {"ppo": "PPO, one policy per preference", "eql": "EQL (no demonstrations)",
+          "mope-nodemo": "MoPE alone (the paper's method)", "mope": "MoPE + demonstrations (the defaults)"}
+#: Catch weights of the outcome rates in the table, and those where leaving the arena is judged.
+WIN_PREFS = (1.0, 0.9, 0.8, 0.7)
+OUT_PREFS = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5)
 #: Red's reference policies (mope.envs.confrontation_batch.REFERENCE_POLICIES), one point each: the points a
 #: learner must reach or pass, evaluated from the same initial states as the agents.
 REFERENCES = ("scripted pursuer", "leave the arena", "pure pursuit", "random")
 EVAL_SEED = 10_000
 FIG6_PREFS = ((0.0, 1.0), (0.25, 0.75), (0.5, 0.5), (0.75, 0.25), (1.0, 0.0))
-COLORS = {"ppo": "tab:orange", "eql": "tab:gray", "mope": "tab:green"}
-MARKERS = {"ppo": "s", "eql": "^", "mope": "o"}
+COLORS = {"ppo": "tab:orange", "eql": "tab:gray", "mope-nodemo": "tab:blue", "mope": "tab:green"}
+MARKERS = {"ppo": "s", "eql": "^", "mope-nodemo": "v", "mope": "o"}
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -102,8 +121,10 @@ def summarize(prefs: np.ndarray, episodes: Any, per_pref: int, ref_point: np.nda
     }
 
 
-def evaluate_agent(run_dir: Path, prefs: np.ndarray, episodes: int, record_prefs: np.ndarray | None = None) -> tuple:
-    """Play a trained EQL/MoPE run under each preference; return its episodes (and recorded games)."""
+def evaluate_agent(run_dir: Path, prefs: np.ndarray, episodes: int, record_prefs: np.ndarray | None = None
+                   ) -> tuple[Any, Any, Any]:
+    """Play a trained agent's run under each preference; return its episodes, its recorded games (or None) and
+    the agent itself."""
     import mo_gymnasium as mo_gym
 
     from mope.agent.agent import MoPE
@@ -124,7 +145,34 @@ def evaluate_agent(run_dir: Path, prefs: np.ndarray, episodes: int, record_prefs
         rp = np.asarray(record_prefs, dtype=np.float64)
         games = play_episodes(lambda obs, idx: agent.greedy_actions(obs, rp[idx]), make, len(rp),
                               [EVAL_SEED] * len(rp), limit, c.gamma, record=True)
-    return eps, games
+    return eps, games, agent
+
+
+def mean_discounted(discounted: np.ndarray, n: int, per_pref: int) -> np.ndarray:
+    """``(n, m)`` mean discounted return of each of ``n`` preferences (or policies) from its ``per_pref``
+    episodes (pref-major rows)."""
+    return discounted.reshape(n, per_pref, -1).mean(axis=1)
+
+
+def acceptance_scores(utility: np.ndarray, ref_utility: np.ndarray, rates: dict[float, dict[str, float]]
+                      ) -> dict[str, float]:
+    """One seed's scores against the issue's acceptance list.
+
+    Args:
+        utility: ``(n,)`` the method's discounted utility ``w^T G(w)`` at each evaluation preference.
+        ref_utility: ``(n,)`` the reference policies' upper envelope there.
+        rates: Outcome rates (:func:`mope.evaluation.game_probe.outcome_rates`) at every catch weight of
+            :data:`WIN_PREFS` and :data:`OUT_PREFS`.
+
+    Returns:
+        ``eu``, ``eu_envelope``, ``eu_gap`` (eu minus the envelope), ``win_<w>`` per catch weight, ``win_hi`` (mean
+        win share at w_catch 1, 0.9, 0.8) and ``out_lo_max`` (the largest out-of-arena share at w_catch <= 0.5).
+    """
+    return {"eu": float(np.mean(utility)), "eu_envelope": float(np.mean(ref_utility)),
+            "eu_gap": float(np.mean(utility - ref_utility)),
+            **{f"win_{w:g}": float(rates[w]["win"]) for w in WIN_PREFS},
+            "win_hi": float(np.mean([rates[w]["win"] for w in (1.0, 0.9, 0.8)])),
+            "out_lo_max": float(max(rates[w]["out"] for w in OUT_PREFS))}
 
 
 def evaluate_ppo(folders: list[Path], episodes: int, gamma: float = 0.99) -> tuple[np.ndarray, Any]:
@@ -206,15 +254,17 @@ def plot_fig6(games: Any, prefs: np.ndarray, half: float, path: Path) -> Path:
 # ------------------------------------------------------------------------------------------------------------
 def confrontation_jobs(seeds: Sequence[int], steps: int, ppo_prefs: int, ppo_steps: int, eval_prefs: int,
                        device: str, overrides: dict[str, Any]) -> list[Job]:
-    """EQL and MoPE runs (one per seed) and PPO policies (K per seed), seed-major."""
+    """The agents' runs (:data:`LEARNERS`, one per seed, each from the game's defaults) and PPO policies (K per
+    seed), seed-major."""
     from mope.preferences import equally_spaced
 
-    base = {"env_id": conf.DISCRETE_ID, "total_steps": steps, "eval_every": 0, "eval_prefs": eval_prefs,
-            "checkpoint_every": 0, **overrides}
+    base = {"env_id": conf.DISCRETE_ID, "total_steps": steps, "eval_prefs": eval_prefs,
+            "checkpoint_every": 25_000, **overrides}
     ppo_w = equally_spaced(2, ppo_prefs)
     jobs = []
     for s in seeds:
-        jobs += [Job(f"{a}-s{s}", "train", Config.for_algo(a, seed=s, **base).to_dict()) for a in ("eql", "mope")]
+        jobs += [Job(f"{name}-s{s}", "train", Config.from_dict({"algo": algo, "seed": s, **changes, **base}).to_dict())
+                 for name, (algo, changes) in LEARNERS.items()]
         jobs += [Job(ppo_name(s, k), "ppo", {"pref": ppo_w[k].tolist(), "steps": ppo_steps, "seed": 1000 * s + k,
                                              "env_id": conf.CONTINUOUS_ID, "device": device})
                  for k in range(ppo_prefs)]
@@ -247,46 +297,68 @@ def check_confrontation_args(seeds: int | str | Sequence[int], steps: int, ppo_p
 
 def evaluate_confrontation(out: Path, seeds: Sequence[int], ppo_prefs: int, eval_prefs: int, episodes: int,
                            max_steps: int | None) -> tuple[dict[str, list[dict[str, Any]]], Any]:
-    """Every method's summary per seed, and MoPE's recorded Fig. 6 games (the first seed)."""
+    """Every method's summary and scores (:func:`acceptance_scores`) per seed, and MoPE's recorded Fig. 6 games
+    (the first seed)."""
     from mope.envs.confrontation_batch import play_reference
+    from mope.evaluation.game_probe import outcome_rates, play_agent
     from mope.paper.ppo import Episodes
     from mope.preferences import equally_spaced
 
     probe = conf.RobotConfrontationEnv()
-    ref = conf.reference_point(1.0, max(max_steps or 0, conf.DEFAULT_HORIZON))
+    horizon = max(max_steps or 0, conf.DEFAULT_HORIZON)
+    ref = conf.reference_point(1.0, horizon)
     eval_w = equally_spaced(2, eval_prefs)
     fig6_w = np.asarray(FIG6_PREFS)
+    catch_w = (*WIN_PREFS, *OUT_PREFS)
+    starts = [EVAL_SEED + j for j in range(episodes)]
+    played = {name: play_reference(name, starts, horizon) for name in REFERENCES}
+    ref_utility = np.max([eval_w @ disc.mean(axis=0) for _, disc, _ in played.values()], axis=0)
     per_seed: dict[str, list[dict[str, Any]]] = {m: [] for m in METHODS}
     games = None
     for s in seeds:
         w, eps = evaluate_ppo([out / ppo_name(s, k) for k in range(ppo_prefs)], episodes)
-        per_seed["ppo"].append(summarize(w, eps, episodes, ref, probe.dt, probe.v_max))
-        for a in ("eql", "mope"):
+        summary = summarize(w, eps, episodes, ref, probe.dt, probe.v_max)
+        utility = (eval_w @ mean_discounted(eps.discounted, len(w), episodes).T).max(axis=1)  # the best policy
+        nearest = {x: int(np.argmin(np.abs(w[:, 0] - x))) for x in catch_w}  # the policy trained nearest x
+        rates = {x: outcome_rates(summary["outcomes"][k]) for x, k in nearest.items()}
+        per_seed["ppo"].append({**summary, **acceptance_scores(utility, ref_utility, rates)})
+        for a in LEARNERS:
             record = fig6_w if (a == "mope" and s == seeds[0]) else None
-            eps, g = evaluate_agent(out / f"{a}-s{s}", eval_w, episodes, record)
+            eps, g, agent = evaluate_agent(out / f"{a}-s{s}", eval_w, episodes, record)
             games = g if g is not None else games
-            per_seed[a].append(summarize(eval_w, eps, episodes, ref, probe.dt, probe.v_max))
-    for name in REFERENCES:
-        ret, disc, outcomes = play_reference(name, [EVAL_SEED + j for j in range(episodes)] * eval_prefs,
-                                             max(max_steps or 0, conf.DEFAULT_HORIZON))
+            summary = summarize(eval_w, eps, episodes, ref, probe.dt, probe.v_max)
+            utility = (mean_discounted(eps.discounted, eval_prefs, episodes) * eval_w).sum(axis=1)
+            rates = {x: outcome_rates(play_agent(agent, x, episodes, agent.config.gamma, horizon)[1])
+                     for x in catch_w}
+            per_seed[a].append({**summary, **acceptance_scores(utility, ref_utility, rates)})
+    for name, (ret, disc, outcomes) in played.items():
         eps = Episodes(ret, disc, np.full(len(ret), 0), outcomes)
-        per_seed[name] = [summarize(np.full((1, 2), 0.5), eps, len(ret), ref, probe.dt, probe.v_max)]
+        summary = summarize(np.full((1, 2), 0.5), eps, len(ret), ref, probe.dt, probe.v_max)
+        rates = dict.fromkeys(catch_w, outcome_rates(outcomes))  # a scripted policy ignores the preference
+        per_seed[name] = [{**summary, **acceptance_scores(eval_w @ disc.mean(axis=0), ref_utility, rates)}]
     return per_seed, games
+
+
+SCORE_KEYS = ("eu", "eu_envelope", "eu_gap", *(f"win_{w:g}" for w in WIN_PREFS), "win_hi", "out_lo_max")
 
 
 def confrontation_results(out: Path, per_seed: dict[str, list[dict[str, Any]]], seeds: Sequence[int]
                           ) -> dict[str, Any]:
-    """Mean and std over seeds of every table metric, plus the first seed's solutions and the agents' training
-    time."""
-    keys = ("hv", "win", "loss", "out", "blue_out", "timeout", "strategies", "entropy_bits", "r_catch", "r_move")
+    """Mean, std and bootstrap 95 % CI over seeds of every table metric and score, each seed's values, plus the
+    first seed's solutions and the agents' training time."""
+    from mope.experiments.stats import bootstrap_ci
+
+    keys = ("hv", "win", "loss", "out", "blue_out", "timeout", "strategies", "entropy_bits", "r_catch", "r_move",
+            *SCORE_KEYS)
     results: dict[str, Any] = {}
     for m in (*METHODS, *REFERENCES):
         vals = {k: np.array([r[k] for r in per_seed[m]], dtype=np.float64) for k in keys}
-        results[m] = {k: {"mean": float(v.mean()), "std": float(v.std())} for k, v in vals.items()}
+        results[m] = {k: {"mean": float(v.mean()), "std": float(v.std()), "ci95": list(bootstrap_ci(v)),
+                          "seeds": v.round(4).tolist()} for k, v in vals.items()}
         results[m]["solutions"] = len(per_seed[m][0]["points"])
         results[m]["points_seed0"] = per_seed[m][0]["points"].round(4).tolist()
         results[m]["prefs_seed0"] = per_seed[m][0]["prefs"].round(4).tolist()
-    for a in ("eql", "mope"):
+    for a in LEARNERS:
         walls = [json.loads((out / f"{a}-s{s}" / "summary.json").read_text()) for s in seeds]
         results[a]["train_wall_s"] = float(np.mean([w.get("wall_s", np.nan) for w in walls]))
     return results
@@ -322,28 +394,51 @@ def confrontation_table(results: dict[str, Any], seeds: int, steps: int, ppo_ste
     return markdown_table(header, rows)
 
 
+def scores_table(results: dict[str, Any], seeds: int, episodes: int, eval_prefs: int) -> str:
+    """The acceptance scores per method (mean over seeds, bootstrap 95 % CI over seeds)."""
+    from mope.experiments.plots import markdown_table
+
+    def ci(d: dict[str, Any], fmt: str) -> str:
+        return f"{d['mean']:{fmt}}" if seeds == 1 else f"{d['mean']:{fmt}} [{d['ci95'][0]:{fmt}}, {d['ci95'][1]:{fmt}}]"
+
+    header = ["method", "win @ w_catch 1 / 0.9 / 0.8 / 0.7", "win, w_catch 0.8-1", "max out, w_catch <= 0.5",
+              f"discounted EU ({eval_prefs} prefs)", "EU - references' envelope"]
+    rows = []
+    for m in (*METHODS, "scripted pursuer"):
+        r = results[m]
+        rows.append([LABELS.get(m, f"reference: {m}"), " / ".join(f"{r[f'win_{w:g}']['mean']:.2f}" for w in WIN_PREFS),
+                     ci(r["win_hi"], ".3f"), f"{r['out_lo_max']['mean']:.3f} (max {max(r['out_lo_max']['seeds']):.2f})",
+                     ci(r["eu"], ".3f"), ci(r["eu_gap"], "+.3f")])
+    env = results["scripted pursuer"]["eu_envelope"]["mean"]
+    return (markdown_table(header, rows) + f"\n\n{seeds} seed(s), {episodes} common start states (reset seeds "
+            f"{EVAL_SEED}..{EVAL_SEED + episodes - 1}); references' upper envelope of discounted EU: {env:.3f}. "
+            "Mean over seeds [bootstrap 95 % CI over seeds]; max out: the mean over seeds of each seed's largest "
+            "out-of-arena share at w_catch 0, 0.1, ..., 0.5 (and the largest of any seed).")
+
+
 def reproduce_confrontation(out: str | Path, seeds: int | str | Sequence[int] = 1, steps: int = 15_000,
-                            ppo_prefs: int = 11, eval_prefs: int = 100, episodes: int = 5, workers: int = 2,
+                            ppo_prefs: int = 11, eval_prefs: int = 100, episodes: int = 100, workers: int = 2,
                             progress: bool = True, ppo_budget: str = "each", device: str = "cpu",
                             backend: str = "local", address: str | None = None, **overrides: Any) -> dict[str, Any]:
-    """Train PPO x K, EQL and MoPE, evaluate them and write Fig. 5, Fig. 6 and the table.
+    """Train PPO x K and the agents of :data:`LEARNERS`, evaluate them and write Fig. 5, Fig. 6 and the tables.
 
     Args:
-        out: Output folder (run folders ``eql-s<seed>``, ``mope-s<seed>``, ``ppo-s<seed>-pref<k>`` inside).
+        out: Output folder (run folders ``eql-s<seed>``, ``mope-nodemo-s<seed>``, ``mope-s<seed>``,
+            ``ppo-s<seed>-pref<k>`` inside).
         seeds: Seeds per method: a count ``N`` (``0..N-1``), a range ``"5-9"`` or a list
             (:func:`mope.experiments.sweep.seed_list`); the figures show the first.
         steps: Environment steps per EQL/MoPE agent, and per PPO policy (``ppo_budget="each"``) or for all K
             together (``"shared"``).
         ppo_prefs: K, PPO's equally spaced preferences.
         eval_prefs: Equally spaced preferences for evaluating EQL and MoPE.
-        episodes: Episodes per preference (or PPO policy).
+        episodes: Episodes per preference (or PPO policy): the common start states.
         workers: Training processes.
         progress: Show a progress bar over the runs.
         ppo_budget: ``"each"`` or ``"shared"`` (see the module docstring).
         device: Torch device of PPO (EQL/MoPE take ``device`` from ``overrides``, default cpu).
         backend: ``local`` or ``ray`` (the job runner's backends).
         address: Ray cluster address.
-        **overrides: Config fields for EQL and MoPE (e.g. ``n_omega=32``).
+        **overrides: Config fields for every agent (e.g. ``n_omega=32``), over the game's defaults.
 
     Returns:
         ``{"results", "table", "out", "train_wall_s", "eval_wall_s"}``.
@@ -369,7 +464,8 @@ def reproduce_confrontation(out: str | Path, seeds: int | str | Sequence[int] = 
         results = confrontation_results(out, per_seed, seeds)
         results["reference_front_hv"] = reference_front_hv(
             per_seed, conf.reference_point(1.0, max(overrides.get("max_episode_steps") or 0, conf.DEFAULT_HORIZON)))
-        table = confrontation_table(results, len(seeds), steps, ppo_steps, ppo_prefs, eval_prefs)
+        table = scores_table(results, len(seeds), episodes, eval_prefs) + "\n\n" + confrontation_table(
+            results, len(seeds), steps, ppo_steps, ppo_prefs, eval_prefs)
         table += f"\n\nHV of the four reference policies' front: {results['reference_front_hv']:.1f}"
         (out / "table.md").write_text(table + "\n")
         ref = conf.reference_point(1.0, max(overrides.get("max_episode_steps") or 0, conf.DEFAULT_HORIZON))

@@ -203,7 +203,7 @@ class RunSettings:
         return [f.name for f in dataclasses.fields(cls)]
 
 
-@dataclass
+@dataclass(init=False)
 class Config:
     """All settings of one training run: the learner's hyperparameters, and ``run`` (:class:`RunSettings`).
 
@@ -318,8 +318,7 @@ class Config:
     #: Share of every batch drawn uniformly from the demonstrations (0: they compete in prioritized replay).
     demo_batch_share: float = 0.0
 
-    # --- experimental: options the studies tried and did not adopt (off by default; docs/design.md) -----------
-    # Each came out of probing the mirrored map's divergence and fixed some seeds but not others.
+    # --- experimental: tried against the mirrored map's divergence, not adopted (off; docs/design.md) ---------
     #: H, heads of the convex head whose minimum is Q (Maxmin Q-learning, Lan et al. 2020); 1: a single head.
     #: The conditioned head has one head whatever this says.
     n_critics: int = 1
@@ -329,6 +328,23 @@ class Config:
     reward_scale: float = 1.0
 
     run: RunSettings = field(default_factory=RunSettings)
+
+    def __init__(self, **settings: Any) -> None:
+        """Every setting by keyword, run settings flat (``Config(eval_prefs=100)``) or as ``run``; an unknown key is
+        a :class:`ConfigError` that names the closest field, not a TypeError."""
+        run = settings.pop("run", None)
+        run_settings = {key: settings.pop(key) for key in list(settings) if key in _RUN_NAMES}
+        for key in settings:
+            if key not in _HYPERPARAMETER_NAMES:
+                raise unknown_key_error(key)
+        for f in dataclasses.fields(self):
+            if f.name != "run":
+                default = f.default_factory() if f.default is dataclasses.MISSING else f.default  # type: ignore[misc]
+                setattr(self, f.name, settings.get(f.name, default))
+        if run_settings:
+            run = RunSettings(**{**(dataclasses.asdict(run) if isinstance(run, RunSettings) else {}), **run_settings})
+        self.run = RunSettings() if run is None else run
+        self.__post_init__()
 
     def __post_init__(self) -> None:
         _check_types(self)
@@ -669,26 +685,5 @@ def _parse_problem(exc: Exception) -> str:
     return str(exc).splitlines()[0][:200] if str(exc) else type(exc).__name__
 
 
-_dataclass_init = Config.__init__
-
-
-@functools.wraps(_dataclass_init)
-def _checked_init(self: Config, *args: Any, **kwargs: Any) -> None:
-    # Config(sigma_omgea=0.1) would otherwise fail with a TypeError from the generated __init__; run settings
-    # given flat (Config(eval_prefs=100)) go into ``run``.
-    run_kwargs = {}
-    for key in list(kwargs):
-        if key in _RUN_NAMES:
-            run_kwargs[key] = kwargs.pop(key)
-        elif key not in _FIELD_NAMES:
-            raise unknown_key_error(key)
-    if run_kwargs:
-        base = kwargs.get("run")
-        kwargs["run"] = RunSettings(**{**(dataclasses.asdict(base) if isinstance(base, RunSettings) else {}),
-                                       **run_kwargs})
-    _dataclass_init(self, *args, **kwargs)
-
-
-_FIELD_NAMES = frozenset([*Config.hyperparameter_names(), "run"])
+_HYPERPARAMETER_NAMES = frozenset(Config.hyperparameter_names())
 _RUN_NAMES = frozenset(RunSettings.field_names())
-Config.__init__ = _checked_init  # type: ignore[method-assign]

@@ -267,7 +267,10 @@ def test_benchmark_bad_input_is_one_line(tmp_path: Path, args: list[str], needle
 @pytest.mark.slow
 def test_benchmark_quick_runs_and_keeps_finished_runs(tmp_path: Path) -> None:
     out = tmp_path / "bench"
-    res = cli("benchmark", "--quick", "--out", str(out), "--no-progress", timeout=1500)
+    # --steps 500: every environment, method and file of --quick at a quarter of its smallest budget (the learning
+    # itself is tested elsewhere; --quick's own budgets took 10 minutes of this suite)
+    quick = ("benchmark", "--quick", "--steps", "500", "--out", str(out), "--no-progress")
+    res = cli(*quick, timeout=1500)
     assert res.returncode == 0, res.stderr
     text = (out / "benchmark.md").read_text()
     for env_id in ("deep-sea-treasure-v0", "resource-gathering-v0", "minecart-deterministic-v0", "four-room-v0"):
@@ -276,5 +279,5 @@ def test_benchmark_quick_runs_and_keeps_finished_runs(tmp_path: Path) -> None:
     assert summary["deep-sea-treasure-v0"]["_meta"]["known_front"] is True
     assert summary["four-room-v0"]["_meta"]["known_front"] is False
     stamp = (out / "deep-sea-treasure-v0-mope-s0" / "summary.json").stat().st_mtime
-    again = cli("benchmark", "--quick", "--out", str(out), "--no-progress")  # a re-run keeps the finished runs
+    again = cli(*quick)  # a re-run keeps the finished runs
     assert again.returncode == 0 and (out / "deep-sea-treasure-v0-mope-s0" / "summary.json").stat().st_mtime == stamp

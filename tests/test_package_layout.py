@@ -25,7 +25,8 @@ def module_name(path: Path) -> str:
 
 def imported_names(tree: ast.Module) -> list[str]:
     """Every module path this file imports, at the top or inside functions (``if TYPE_CHECKING:`` blocks aside),
-    ``importlib.import_module`` of a constant included."""
+    ``importlib.import_module`` of a constant and the former module a package serves
+    (:func:`mope.moved.former_module_names`) included."""
     type_only = {id(n) for node in ast.walk(tree)
                  if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test)
                  for stmt in node.body for n in ast.walk(stmt)}
@@ -45,6 +46,8 @@ def imported_names(tree: ast.Module) -> list[str]:
             value = arg.value if isinstance(arg, ast.Constant) else constants.get(getattr(arg, "id", ""))
             if isinstance(value, str):
                 names.append(value)
+        elif isinstance(node, ast.Call) and ast.unparse(node.func) == "former_module_names":
+            names += [a.value for a in node.args if isinstance(a, ast.Constant) and isinstance(a.value, str)]
     return names
 
 

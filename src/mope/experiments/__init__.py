@@ -2,27 +2,9 @@
 of job it runs (``job_kinds.py``), sweeps, reports and their statistics, folder locks and plotting.
 
 ``from mope.experiments import train_run`` keeps working: the names of the former module ``mope.experiments`` (now
-:mod:`mope.experiments.runs`) are served from there on first use, so that importing one submodule does not
-import the others.
+:mod:`mope.experiments.runs`) are served from there on first use (:func:`mope.moved.former_module_names`).
 """
 
-from __future__ import annotations
+from mope.moved import former_module_names
 
-import importlib
-from typing import Any
-
-_FORMER = "mope.experiments.runs"
-
-
-def __getattr__(name: str) -> Any:
-    if not name.startswith("__"):
-        try:
-            return importlib.import_module(f"{__name__}.{name}")
-        except ModuleNotFoundError as exc:
-            if exc.name != f"{__name__}.{name}":
-                raise
-        try:
-            return getattr(importlib.import_module(_FORMER), name)
-        except AttributeError:
-            pass
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = former_module_names(__name__, "mope.experiments.runs")

@@ -1,10 +1,11 @@
 """The one runner for batches of training jobs: local processes or Ray, resumable, errors kept per job.
 
 A :class:`Job` is a named unit of work with a folder of its own (``<out>/<name>``): ``train`` (one mope run,
-from a config; it resumes from ``checkpoints/resume.pt``) or ``ppo`` (one PPO policy of the outer-loop
-baseline). :func:`run_jobs` runs a list of them and reports each outcome; ``mope sweep``, ``mope reproduce dst``
-and ``mope reproduce confrontation`` all go through it, so they share resumption, the Ray backend, the handling
-of a crashed worker and ``error.txt`` per failed job.
+from a config; it resumes from ``checkpoints/resume.pt``), ``ppo`` (one PPO policy of the outer-loop
+baseline) or ``envelope`` (what each does: :mod:`mope.experiments.job_kinds`). :func:`run_jobs` runs a list of
+them and reports each outcome; ``mope sweep``, ``mope reproduce dst``, ``mope reproduce confrontation`` and
+``mope benchmark`` all go through it, so they share resumption, the Ray backend, the handling of a crashed worker
+and ``error.txt`` per failed job.
 
 Backends: ``local`` runs jobs in a process pool (forkserver); ``ray`` runs them as Ray tasks on a local
 instance or a cluster (``address``).

@@ -337,6 +337,9 @@ def test_one_set_parser_serves_train_and_sweep() -> None:
     assert parse_set(items) == sweep_parse_set(items) == want
     with pytest.raises(SweepError, match="is not KEY=VALUE"):
         sweep_parse_set(["oops"])
+    # a plain word stays the word: an empty value switches demonstrations off, "yes" is no boolean
+    assert parse_set(["demos=", "obs_encoding=yes", "q_head=~"]) == {"demos": "", "obs_encoding": "yes", "q_head": "~"}
+    assert Config.from_dict({"env_id": "mope/RobotConfrontationDiscrete-v0", **parse_set(["demos="])}).demos == ""
     assert parse_set(["totl_steps=3"]) == {"totl_steps": 3}  # keys are checked by the caller ...
     with pytest.raises(ConfigError, match="totl_steps"):
         parse_set(["totl_steps=3"], check_keys=True)  # ... or here

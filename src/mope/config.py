@@ -617,10 +617,10 @@ def parse_set(items: Sequence[str] | None, check_keys: bool = False,
               error: type[ConfigError] = ConfigError) -> dict[str, Any]:
     """``KEY=VALUE`` strings (every command's ``--set``, a sweep's included) as a dict; the one ``--set`` parser.
 
-    VALUE is read as JSON when it parses (numbers, ``1e-3`` included, lists, true/false, null), else as YAML (flow
-    lists and mappings: ``[8, 8]``, ``{a: 1}``), else kept as the string; ``hidden_sizes`` and ``disc_hidden``
-    also take ``256,256``. A dash in KEY reads as an underscore. Types and ranges are checked later, by
-    :class:`Config`.
+    VALUE is read as JSON when it parses (numbers, ``1e-3`` included, lists, true/false, null), else as YAML if it
+    is a flow list or mapping (``[8, 8]``, ``{a: 1}``), else kept as the string (``demos=`` is the empty
+    string); ``hidden_sizes`` and ``disc_hidden`` also take ``256,256``. A dash in KEY reads as an underscore.
+    Types and ranges are checked later, by :class:`Config`.
 
     Args:
         items: The ``KEY=VALUE`` strings.
@@ -655,12 +655,15 @@ def _parse_value(key: str, raw: str, error: type[ConfigError]) -> Any:
         return json.loads(raw)
     except json.JSONDecodeError:
         pass
-    try:
-        value = load_yaml(raw)
-    except yaml.YAMLError:
+    if not raw.strip().startswith(("[", "{")):  # a plain word stays the word: "demos=" is "", "yes" is not True
         value = raw
-    except Exception as exc:  # noqa: BLE001 - an alias bomb or a recursive value
-        raise error(f"--set {key}: {_parse_problem(exc)}") from None
+    else:
+        try:
+            value = load_yaml(raw)
+        except yaml.YAMLError:
+            value = raw
+        except Exception as exc:  # noqa: BLE001 - an alias bomb or a recursive value
+            raise error(f"--set {key}: {_parse_problem(exc)}") from None
     if isinstance(value, str) and key in _INT_LIST_FIELDS:
         try:
             return [int(x) for x in raw.split(",")]

@@ -655,15 +655,14 @@ def _parse_value(key: str, raw: str, error: type[ConfigError]) -> Any:
         return json.loads(raw)
     except json.JSONDecodeError:
         pass
-    if not raw.strip().startswith(("[", "{")):  # a plain word stays the word: "demos=" is "", "yes" is not True
+    try:
+        value = load_yaml(raw)
+    except yaml.YAMLError:
         value = raw
-    else:
-        try:
-            value = load_yaml(raw)
-        except yaml.YAMLError:
-            value = raw
-        except Exception as exc:  # noqa: BLE001 - an alias bomb or a recursive value
-            raise error(f"--set {key}: {_parse_problem(exc)}") from None
+    except Exception as exc:  # noqa: BLE001 - an alias bomb or a recursive value
+        raise error(f"--set {key}: {_parse_problem(exc)}") from None
+    if not isinstance(value, list | dict):  # a plain word stays the word: "demos=" is "", "yes" is not True
+        value = raw
     if isinstance(value, str) and key in _INT_LIST_FIELDS:
         try:
             return [int(x) for x in raw.split(",")]

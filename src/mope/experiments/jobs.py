@@ -402,3 +402,15 @@ def _sigterm_as_interrupt() -> Any:
 
 
 __all__ = ["BACKENDS", "JOB_KINDS", "Job", "JobError", "check_backend", "run_job", "run_jobs", "unpack_job"]
+
+
+def run_all_or_raise(jobs: list[Job], out: Path, backend: str = "local", workers: int | None = None,
+                     address: str | None = None, progress: bool = True) -> dict[str, dict[str, Any]]:
+    """:func:`run_jobs` for a reproduction, whose tables need every run: raise a :class:`MopeError` naming the
+    first failed run (and its ``error.txt``) if any failed; else the records."""
+    records = run_jobs(jobs, out, backend, workers, address, progress, desc="runs")
+    failed = [r for r in records.values() if r["status"] == "failed"]
+    if failed:
+        raise MopeError(f"{len(failed)} of {len(jobs)} runs failed, the first: {failed[0]['name']} "
+                        f"({failed[0]['error']}); see {out / failed[0]['name'] / 'error.txt'}")
+    return records

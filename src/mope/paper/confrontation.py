@@ -47,8 +47,8 @@ import numpy as np
 
 import mope.envs.confrontation as conf
 from mope.config import Config
-from mope.errors import ConfigError, MopeError
-from mope.experiments.jobs import Job, run_jobs
+from mope.errors import ConfigError
+from mope.experiments.jobs import Job, run_all_or_raise
 from mope.experiments.locks import FolderLock
 
 METHODS = ("ppo", "eql", "mope-nodemo", "mope")
@@ -448,11 +448,7 @@ def reproduce_confrontation(out: str | Path, seeds: int | str | Sequence[int] = 
     out = Path(out)
     with FolderLock(out, what="reproduction folder"):
         t0 = time.perf_counter()
-        records = run_jobs(jobs, out, backend, workers, address, progress, desc="runs")
-        failed = [r for r in records.values() if r["status"] == "failed"]
-        if failed:
-            raise MopeError(f"{len(failed)} of {len(jobs)} runs failed, the first: {failed[0]['name']} "
-                            f"({failed[0]['error']}); see {out / failed[0]['name'] / 'error.txt'}")
+        records = run_all_or_raise(jobs, out, backend, workers, address, progress)
         train_wall = time.perf_counter() - t0
         t1 = time.perf_counter()
         per_seed, games = evaluate_confrontation(out, seeds, ppo_prefs, eval_prefs, episodes,

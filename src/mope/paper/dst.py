@@ -25,8 +25,8 @@ from typing import Any
 import numpy as np
 
 from mope.config import Config, check_algo
-from mope.errors import ConfigError, MopeError
-from mope.experiments.jobs import Job, run_jobs
+from mope.errors import ConfigError
+from mope.experiments.jobs import Job, run_all_or_raise
 from mope.experiments.locks import FolderLock
 
 DST = "deep-sea-treasure-v0"
@@ -224,11 +224,7 @@ def reproduce_dst(out: str | Path, seeds: int | str | Sequence[int] = 3, steps: 
     out = Path(out)
     with FolderLock(out, what="reproduction folder"):
         t0 = time.perf_counter()
-        records = run_jobs(jobs, out, backend, workers, address, progress, desc="runs")
-        failed = [r for r in records.values() if r["status"] == "failed"]
-        if failed:
-            raise MopeError(f"{len(failed)} of {len(jobs)} runs failed, the first: {failed[0]['name']} "
-                            f"({failed[0]['error']}); see {out / failed[0]['name'] / 'error.txt'}")
+        records = run_all_or_raise(jobs, out, backend, workers, address, progress)
         train_wall = time.perf_counter() - t0
         n_prefs = Config.from_dict(jobs[0].payload).run.eval_prefs
         results, analyses, curves = {}, {}, {key: {} for key in CURVES}

@@ -281,3 +281,51 @@ def test_benchmark_quick_runs_and_keeps_finished_runs(tmp_path: Path) -> None:
     stamp = (out / "deep-sea-treasure-v0-mope-s0" / "summary.json").stat().st_mtime
     again = cli(*quick)  # a re-run keeps the finished runs
     assert again.returncode == 0 and (out / "deep-sea-treasure-v0-mope-s0" / "summary.json").stat().st_mtime == stamp
+
+
+def _fake_bench_run(out: Path, env_id: str, method: str, seed: int, steps: int, cr: float) -> None:
+    """A finished benchmark run folder as ``mope benchmark`` leaves it (compact files only)."""
+    from mope.experiments.runs import METRIC_COLUMNS
+
+    folder = out / f"{env_id}-{method}-s{seed}"
+    folder.mkdir(parents=True)
+    meta = "peer.json" if method == "envelope" else "config.json"
+    (folder / meta).write_text(json.dumps({"env_id": env_id, "seed": seed, "total_steps": steps}))
+    with open(folder / "metrics.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=METRIC_COLUMNS, restval="nan")
+        w.writeheader()
+        for step, c in ((steps // 2, cr / 2), (steps, cr)):
+            w.writerow({"step": step, "wall_s": step / 100, "train_s": step / 100, "cr": c, "eum": 5 * c,
+                        "hv": 300 * c})
+    (folder / "summary.json").write_text(json.dumps({"final": {"cr": cr}, "train_s_per_1k_steps": 10.0,
+                                                     "peak_rss_mb": 400.0}))
+
+
+def test_benchmark_report_covers_every_committed_piece(tmp_path: Path) -> None:
+    """Pieces run apart (other seeds, another method, another session) make one table; budgets must agree."""
+    from mope.errors import MopeError
+    from mope.paper.benchmark import GITIGNORE, run_benchmark
+
+    out = tmp_path / "bench"
+    _fake_bench_run(out, "deep-sea-treasure-v0", "mope", 0, 20_000, 1.0)
+    _fake_bench_run(out, "deep-sea-treasure-v0", "mope", 1, 20_000, 0.8)
+    _fake_bench_run(out, "deep-sea-treasure-v0", "envelope", 0, 20_000, 0.6)
+    (out / "notes").mkdir()  # not a run: ignored
+    res = run_benchmark(out, report_only=True, progress=False, command="mope benchmark --report-only")
+    text = (out / "benchmark.md").read_text()
+    dst = res["summary"]["deep-sea-treasure-v0"]
+    assert dst["mope"]["seeds"] == 2 and dst["envelope"]["seeds"] == 1
+    assert dst["mope"]["stats"]["cr"]["mean"] == pytest.approx(0.9)
+    assert dst["mope"]["reached"] == 1  # seed 0 reached CR 1 at its last evaluation, seed 1 never
+    assert "## deep-sea-treasure-v0" in text and "Ratios to Envelope" in text
+    assert (out / "deep-sea-treasure-v0.png").is_file()
+
+    _fake_bench_run(out, "deep-sea-treasure-v0", "eql", 0, 10_000, 1.0)  # another budget: cannot share the table
+    with pytest.raises(MopeError, match="different budgets"):
+        run_benchmark(out, report_only=True, progress=False)
+
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    res = cli("benchmark", "--report-only", "--out", str(empty))
+    assert res.returncode == 2 and "holds no finished benchmark run" in res.stderr
+    assert "*/*" in GITIGNORE and "!*/metrics.csv" in GITIGNORE

@@ -389,15 +389,21 @@ def benchmark(
     address: Annotated[str | None, typer.Option(help="Ray address: auto, ray://host:10001.")] = None,
     report_dir: Annotated[Path | None, typer.Option(help="Where the table and figures go [default: --out]")] = None,
     progress: Annotated[bool, typer.Option(help="Show the live line.")] = True,
+    report_only: Annotated[bool, typer.Option(
+        help="Train nothing: rebuild the table and figures from the finished runs already in --out.")] = False,
 ) -> None:
-    """mope's variants beside morl-baselines' Envelope on several environments: one table and figure per env."""
+    """mope's variants beside morl-baselines' Envelope on several environments: one table and figure per env.
+
+    The report covers every finished run in --out, so a benchmark can be run in pieces (one environment or some
+    seeds per call, even on different machines) into one folder.
+    """
     from mope.paper.benchmark import run_benchmark
 
     def split(text: str | None) -> list[str] | None:
         return [x.strip() for x in text.split(",") if x.strip()] if text else None
 
     res = run_benchmark(out, split(envs), split(methods), seeds, quick, steps, workers, backend, address,
-                        report_dir, progress, command="mope " + " ".join(sys.argv[1:]))
+                        report_dir, progress, command="mope " + " ".join(sys.argv[1:]), report_only=report_only)
     typer.echo(res["table"])
     typer.echo(f"table and figures in {res['out']} ({res['wall_s']:.0f} s)")
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -323,6 +324,10 @@ def test_benchmark_report_covers_every_committed_piece(tmp_path: Path) -> None:
     _fake_bench_run(out, "deep-sea-treasure-v0", "eql", 0, 10_000, 1.0)  # another budget: cannot share the table
     with pytest.raises(MopeError, match="different budgets"):
         run_benchmark(out, report_only=True, progress=False)
+    shutil.rmtree(out / "deep-sea-treasure-v0-eql-s0")
+    res = cli("benchmark", "--out", str(out), "--envs", "deep-sea-treasure-v0", "--methods", "eql", "--steps", "500")
+    assert res.returncode == 2 and "holds deep-sea-treasure-v0 runs of 20,000 steps" in res.stderr, res.stderr
+    assert not (out / "deep-sea-treasure-v0-eql-s0").exists()  # refused before training
 
     empty = tmp_path / "empty"
     empty.mkdir()

@@ -195,6 +195,17 @@ def finished_runs(out: Path) -> list[Job]:
     return jobs
 
 
+def _check_budgets(out: Path, jobs: list[Job]) -> None:
+    """Raise a :class:`MopeError` when a planned run's budget differs from its environment's finished runs in
+    ``out``."""
+    have = {j.payload["env_id"]: (j.payload["total_steps"], j.name) for j in finished_runs(out)}
+    for job in jobs:
+        env_id, steps = job.payload["env_id"], job.payload["total_steps"]
+        if env_id in have and have[env_id][0] != steps:
+            raise MopeError(f"{out} holds {env_id} runs of {have[env_id][0]:,} steps ({have[env_id][1]}); this call "
+                            f"would add {steps:,}-step runs, and one table needs one budget: use another --out")
+
+
 def _first(rows: list[dict[str, float]], ok: Any) -> tuple[float, float]:
     """Step and training seconds (evaluations excluded) of the first evaluation where ``ok(row)``; NaN otherwise."""
     for r in rows:
@@ -363,7 +374,7 @@ def run_benchmark(out: str | Path, envs: list[str] | None = None, methods: list[
     else:
         seeds = check_choices(envs, list(methods), 1 if quick else seeds, steps)
         jobs = benchmark_jobs(envs, list(methods), seeds, quick, steps)
-        finished_runs(out)  # different budgets in one folder: say so before training, not after
+        _check_budgets(out, jobs)  # different budgets in one folder: say so before training, not after
     with FolderLock(out, what="benchmark folder"):
         t0 = time.perf_counter()
         if jobs:

@@ -334,3 +334,16 @@ def test_benchmark_report_covers_every_committed_piece(tmp_path: Path) -> None:
     res = cli("benchmark", "--report-only", "--out", str(empty))
     assert res.returncode == 2 and "holds no finished benchmark run" in res.stderr
     assert "*/*" in GITIGNORE and "!*/metrics.csv" in GITIGNORE
+
+
+def test_readme_benchmark_table_is_the_committed_results() -> None:
+    """The README's benchmark table is the one ``mope benchmark`` generates from docs/results/benchmark."""
+    from mope.paper.benchmark import README_MARKERS, readme_table
+
+    root = Path(__file__).resolve().parents[1]
+    summary = json.loads((root / "docs/results/benchmark/benchmark.json").read_text())["summary"]
+    readme = (root / "README.md").read_text()
+    start, end = (readme.index(m) for m in README_MARKERS)
+    block = readme[start + len(README_MARKERS[0]):end].strip("\n") + "\n"
+    assert block == readme_table(summary)
+    assert block == (root / "docs/results/benchmark/readme_table.md").read_text()

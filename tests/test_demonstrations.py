@@ -257,6 +257,8 @@ def test_unreadable_files(tmp_path: Path) -> None:
     (DST, "pursuer", {}, "no scripted policy is registered for 'deep-sea-treasure-v0'"),
     (DST, always(DOWN), {"n_episodes": 0}, "n_episodes=0 is out of range"),
     (DST, always(DOWN), {"max_steps": 0}, "max_steps=0 is out of range"),
+    (DST, always(DOWN), {"roll_in": -1}, "roll_in=-1 is out of range"),
+    (DST, always(DOWN), {"roll_in": 100_000, "max_steps": 1}, "ended during its random roll-in"),
     (DST, always(DOWN), {"pref_range": (0.6, 0.2)}, "need 0 <= lo <= hi <= 1"),
     (DST, always(DOWN), {"pref_range": (0.0, 1.5)}, "need 0 <= lo <= hi <= 1"),
     (DST, always(4), {}, "returned action 4, out of range: choose 0..3"),
@@ -268,3 +270,31 @@ def test_bad_collection_arguments(env_id: str, policy: object, kwargs: dict, exp
     with pytest.raises(DemonstrationError) as err:
         collect_demonstrations(make_env(env_id), policy, **args)  # type: ignore[arg-type]
     assert expected in str(err.value) and "\n" not in str(err.value)
+
+
+# ------------------------------------------------------------------------------------------------------------
+# random roll-in
+# ------------------------------------------------------------------------------------------------------------
+def test_roll_in_starts_the_demonstrator_from_other_states() -> None:
+    env = make_env(GAME)
+    plain = collect_demonstrations(env, "pursuer", 6, seed=5)
+    same = collect_demonstrations(env, "pursuer", 6, seed=5, roll_in=0)
+    for key in ("obs", "actions", "rewards", "prefs", "dones"):  # roll_in=0 is today's stream, bit for bit
+        np.testing.assert_array_equal(getattr(plain, key), getattr(same, key))
+    rolled = collect_demonstrations(env, "pursuer", 6, seed=5, roll_in=30)
+    starts = [make_env(GAME).reset(seed=5 + i)[0] for i in range(6)]
+    first = rolled.obs[np.r_[0, np.flatnonzero(rolled.dones[:-1]) + 1]]
+    # most episodes start where random play left them, not at their reset state
+    moved = sum(not any(np.allclose(f, s) for s in starts) for f in first)
+    assert moved >= 4, moved
+    again = collect_demonstrations(env, "pursuer", 6, seed=5, roll_in=30)  # reproducible
+    np.testing.assert_array_equal(rolled.obs, again.obs)
+
+
+def test_config_roll_in_must_be_non_negative() -> None:
+    from mope.config import Config
+    from mope.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="demo_roll_in"):
+        Config(demo_roll_in=-3)
+    assert Config(demo_roll_in=20).demo_roll_in == 20

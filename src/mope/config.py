@@ -73,7 +73,7 @@ LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0, 
                                 "return_mix": 0.0, "return_window": 2_000, "n_step": 1, "n_envs": 1,
                                 "train_freq": 1, "demos": "", "demo_episodes": 100, "demo_margin": 0.8,
                                 "demo_loss_weight": 1.0, "demo_pretrain_steps": 0,
-                                "demo_batch_share": 0.0}
+                                "demo_batch_share": 0.0, "demo_roll_in": 0}
 
 
 def check_preset(name: str) -> str:
@@ -317,6 +317,11 @@ class Config:
     demo_pretrain_steps: int = 0
     #: Share of every batch drawn uniformly from the demonstrations (0: they compete in prioritized replay).
     demo_batch_share: float = 0.0
+    #: Random roll-in of scripted demonstrations: each episode starts with U{0..demo_roll_in} uniformly random
+    #: actions, not recorded, before the demonstrator takes over, so the demonstrations also cover states that the
+    #: demonstrator never reaches from a reset (0: every episode is the demonstrator's from its reset). Not in the
+    #: robot game's recipe: 30 gave fewer wins there (docs/results/game-study).
+    demo_roll_in: int = 0
 
     # --- experimental: tried against the mirrored map's divergence, not adopted (off; docs/design.md) ---------
     #: H, heads of the convex head whose minimum is Q (Maxmin Q-learning, Lan et al. 2020); 1: a single head.
@@ -502,7 +507,7 @@ def _validate_hyperparameters(self: Config) -> None:
         need(getattr(self, name) >= 1, name, "must be >= 1")
     need(self.buffer_size >= self.batch_size, "buffer_size", f"must be >= batch_size ({self.batch_size})")
     need(1 <= self.n_step <= 1000, "n_step", "must lie in [1, 1000] (an update runs batch_size x n_step states)")
-    for name in ("learning_starts", "lb_homotopy_steps", "demo_pretrain_steps"):
+    for name in ("learning_starts", "lb_homotopy_steps", "demo_pretrain_steps", "demo_roll_in"):
         need(getattr(self, name) >= 0, name, "must be >= 0")
     need(self.demo_episodes >= 1, "demo_episodes", "must be >= 1")
     for name in ("lb_weight", "per_alpha", "mi_alpha", "component_loss_weight", "component_anchor_weight",

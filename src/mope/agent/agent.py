@@ -132,7 +132,7 @@ def demonstrations_for(cfg: Config, env: gym.Env) -> Demonstrations | None:
     demo_env = make_env(cfg.env_id, cfg.max_episode_steps)
     return Demonstrations.concatenate([
         collect_demonstrations(demo_env, name, cfg.demo_episodes, pref_range,
-                               seed=1_000_000 * (k + 1) + 10_000 * cfg.seed)
+                               seed=1_000_000 * (k + 1) + 10_000 * cfg.seed, roll_in=cfg.demo_roll_in)
         for k, (name, pref_range) in enumerate(sources)])
 
 

@@ -314,7 +314,7 @@ class ScriptedPolicy(NamedTuple):
 
 def collect_demonstrations(env: gym.Env, policy: Policy | str, n_episodes: int,
                            pref_range: tuple[float, float] | None = None, seed: int = 0,
-                           max_steps: int | None = None) -> Demonstrations:
+                           max_steps: int | None = None, roll_in: int = 0) -> Demonstrations:
     """Roll out ``policy`` for ``n_episodes`` episodes and record every transition.
 
     Episode ``i`` starts from ``env.reset(seed=seed + i)`` and ends when the environment terminates or truncates
@@ -333,6 +333,9 @@ def collect_demonstrations(env: gym.Env, policy: Policy | str, n_episodes: int,
         pref_range: ``(lo, hi)`` of the first objective's weight, ``0 <= lo <= hi <= 1``.
         seed: Reset seed of the first episode, and the seed of the preference draws.
         max_steps: Optional cap on each episode's length (below the environment's own limit).
+        roll_in: Each episode first takes ``k ~ U{0..roll_in}`` uniformly random actions (drawn from
+            ``np.random.default_rng(seed + 1)``), which are not recorded; the demonstrator plays from there. An
+            episode that ends during its roll-in records nothing. 0: no roll-in.
 
     Returns:
         The episodes in order.
@@ -345,6 +348,8 @@ def collect_demonstrations(env: gym.Env, policy: Policy | str, n_episodes: int,
     if max_steps is not None and (isinstance(max_steps, bool) or not isinstance(max_steps, int | np.integer)
                                   or max_steps < 1):
         raise DemonstrationError(f"max_steps={max_steps!r} is out of range: use None or an integer >= 1")
+    if isinstance(roll_in, bool) or not isinstance(roll_in, int | np.integer) or roll_in < 0:
+        raise DemonstrationError(f"roll_in={roll_in!r} is out of range: use an integer >= 0")
     if not isinstance(env.action_space, gym.spaces.Discrete):
         raise DemonstrationError(f"demonstrations need a Discrete action space, this environment has "
                                  f"{env.action_space}: wrap it (mope.envs.DiscreteActions)")
@@ -356,10 +361,18 @@ def collect_demonstrations(env: gym.Env, policy: Policy | str, n_episodes: int,
     rng = np.random.default_rng(seed)
     env.action_space.seed(seed)  # a policy that samples the action space is reproducible too
     rows: dict[str, list[Any]] = {k: [] for k in KEYS}
+    roll_rng = np.random.default_rng(seed + 1) if roll_in else None  # its own stream: roll_in=0 changes nothing
     for i in range(n_episodes):
         pref = _draw_pref(rng, pref_range, m)
         obs, _ = env.reset(seed=seed + i)
         steps, done = 0, False
+        if roll_rng is not None:
+            for _ in range(int(roll_rng.integers(0, roll_in + 1))):
+                obs, _, terminated, truncated, _ = env.step(int(roll_rng.integers(n_actions)))
+                steps += 1
+                done = bool(terminated or truncated or (max_steps is not None and steps >= max_steps))
+                if done:
+                    break
         while not done:
             a = _as_action(act(obs, env), n_actions, label)
             next_obs, reward, terminated, truncated, _ = env.step(a)
@@ -369,6 +382,9 @@ def collect_demonstrations(env: gym.Env, policy: Policy | str, n_episodes: int,
                          ("next_obs", next_obs), ("terminated", bool(terminated)), ("dones", done), ("prefs", pref)):
                 rows[k].append(v)
             obs = next_obs
+    if not rows["obs"]:
+        raise DemonstrationError(f"every one of the {n_episodes} episodes ended during its random roll-in "
+                                 f"(roll_in={roll_in}): nothing was demonstrated; use a shorter roll-in")
     return Demonstrations(**{k: np.stack([np.asarray(v) for v in rows[k]]) for k in KEYS})
 
 

@@ -321,6 +321,16 @@ def test_benchmark_report_covers_every_committed_piece(tmp_path: Path) -> None:
     assert "## deep-sea-treasure-v0" in text and "Ratios to Envelope" in text
     assert (out / "deep-sea-treasure-v0.png").is_file()
 
+    _fake_bench_run(out, "resource-gathering-v0", "mope", 0, 50_000, 0.5)  # stochastic: no CR, HV or optimal share
+    run_benchmark(out, report_only=True, progress=False)
+    text = (out / "benchmark.md").read_text()
+    rg = text[text.index("## resource-gathering-v0"):]
+    assert "Stochastic dynamics" in rg and "| CR |" not in rg and "| HV |" not in rg and "| EUM |" in rg
+    assert "| CR |" in text[:text.index("## resource-gathering-v0")]
+    rows = (out / "readme_table.md").read_text().splitlines()
+    assert next(r for r in rows if r.startswith("| resource-gathering-v0")).split("|")[5].strip() == "-"
+    shutil.rmtree(out / "resource-gathering-v0-mope-s0")
+
     _fake_bench_run(out, "deep-sea-treasure-v0", "eql", 0, 10_000, 1.0)  # another budget: cannot share the table
     with pytest.raises(MopeError, match="different budgets"):
         run_benchmark(out, report_only=True, progress=False)

@@ -52,6 +52,9 @@ class EnvBench:
         eval_prefs: Uniform preferences per evaluation.
         max_episode_steps: Episode cap of training and evaluation (None: the registered limit).
         source: Where the budget comes from.
+        stochastic: The dynamics are random. The evaluation plays one episode per preference, so its EUM is an
+            unbiased estimate of the expected utility, but CR, the optimal share and HV compare single outcomes
+            with a front of expected returns: the report leaves them out.
     """
 
     steps: int
@@ -60,6 +63,7 @@ class EnvBench:
     eval_prefs: int
     max_episode_steps: int | None
     source: str
+    stochastic: bool = False
 
 
 #: ``--quick`` evaluates at most this many preferences, episodes of at most this many steps, twice per run.
@@ -70,7 +74,7 @@ BENCH_ENVS: dict[str, EnvBench] = {
                                      "the MoPE paper (Fig. 2) and Yang et al.: 20k steps, 2,000 preferences"),
     "resource-gathering-v0": EnvBench(50_000, 2_000, 2_500, 500, None,
                                       "no published EQL budget: 2.5x Deep-Sea-Treasure's (a 5x5 grid, 3 objectives, "
-                                      "the front's 3 points need the enemy-free detours)"),
+                                      "the front's 3 points need the enemy-free detours)", stochastic=True),
     "minecart-deterministic-v0": EnvBench(100_000, 2_000, 5_000, 100, 1_000,
                                           "morl-baselines' Envelope example (examples/envelope_minecart.py): 100k "
                                           "steps; 100 preferences (each episode can last 1,000 steps)"),
@@ -226,32 +230,42 @@ def summarise(out: Path, jobs: list[Job]) -> dict[str, dict[str, dict[str, Any]]
         runs.setdefault(env_id, {}).setdefault(method, []).append(_read_run(out / job.name))
     table: dict[str, dict[str, dict[str, Any]]] = {}
     for env_id, by_method in runs.items():
+        stochastic = BENCH_ENVS[env_id].stochastic
         known = any(np.isfinite(r["final"].get("cr", math.nan)) for rs in by_method.values() for r in rs)
         best_eum = max(r["final"]["eum"] for rs in by_method.values() for r in rs)
+        optimal = [r["final"].get("eum_optimal", math.nan) for rs in by_method.values() for r in rs]
+        optimal_eum = float(optimal[0]) if optimal and np.isfinite(optimal[0]) else math.nan
+        # the target: 95 % of the way from 0 to the optimal EUM where the front is known, else to the best final
+        # EUM any method reached (EUM may be negative: 5 % of its size below it)
+        ref = optimal_eum if np.isfinite(optimal_eum) else best_eum
+        target = ref - 0.05 * abs(ref)
         table[env_id] = {}
         for method, rs in by_method.items():
-            if known:
-                reach = [_first(r["rows"], lambda row: row["cr"] >= 1.0 - 1e-9) for r in rs]
-            else:  # 95 % of the way from 0 to the best EUM any method reached (EUM may be negative: use the gap)
-                target = best_eum - 0.05 * abs(best_eum)
-                reach = [_first(r["rows"], lambda row, t=target: row["eum"] >= t) for r in rs]
+            reach = [_first(r["rows"], lambda row, t=target: row["eum"] >= t) for r in rs]
+            cover = ([_first(r["rows"], lambda row: row["cr"] >= 1.0 - 1e-9)[0] for r in rs]
+                     if known and not stochastic else [math.nan] * len(rs))
             values = {k: [r["final"].get(k, math.nan) for r in rs]
                       for k in ("cr", "eum", "eum_gap", "hv", "optimal_share", "timeout_share", "path_error")}
             values.update(steps_to_target=[s for s, _ in reach], seconds_to_target=[w for _, w in reach],
+                          steps_to_cr1=cover,
                           s_per_1k=[r["s_per_1k"] for r in rs], peak_rss_mb=[r["peak_rss_mb"] for r in rs])
             table[env_id][method] = {"seeds": len(rs), "values": values,
                                      "stats": {k: vars(aggregate(v)) for k, v in values.items()},
                                      "reached": int(np.sum(np.isfinite(values["steps_to_target"])))}
         budget = int(next(j.payload["total_steps"] for j in jobs if j.payload["env_id"] == env_id))
-        table[env_id]["_meta"] = {"known_front": known, "best_eum": best_eum, "steps": budget}
+        table[env_id]["_meta"] = {"known_front": known, "best_eum": best_eum, "steps": budget,
+                                  "stochastic": stochastic, "optimal_eum": optimal_eum, "target_eum": target}
     return table
 
 
 #: Table columns: (key, label, format). Seconds are training only (evaluations excluded), for every method.
 COLUMNS = (("cr", "CR", ".3f"), ("eum_gap", "EUM gap", ".2f"), ("eum", "EUM", ".2f"), ("hv", "HV", ".1f"),
            ("optimal_share", "optimal share", ".3f"), ("timeout_share", "time-outs", ".3f"),
-           ("steps_to_target", "steps to target", ".0f"), ("s_per_1k", "train s / 1k steps", ".1f"),
+           ("steps_to_cr1", "steps to CR = 1", ".0f"), ("steps_to_target", "steps to 95 % EUM", ".0f"),
+           ("seconds_to_target", "train s to 95 % EUM", ".0f"), ("s_per_1k", "train s / 1k steps", ".1f"),
            ("peak_rss_mb", "peak MiB", ".0f"))
+#: Columns that compare single episodes with a front of expected returns: left out on stochastic environments.
+SINGLE_OUTCOME_COLUMNS = ("cr", "optimal_share", "hv", "steps_to_cr1")
 
 
 def _cell(stats: dict[str, Any], fmt: str) -> str:
@@ -273,16 +287,17 @@ def readme_table(summary: dict[str, dict[str, dict[str, Any]]]) -> str:
     rows = []
     for env_id, by_method in summary.items():
         known = by_method["_meta"]["known_front"]
+        single = not by_method["_meta"].get("stochastic", False)  # single outcomes compare with the front
         steps = by_method["_meta"]["steps"]
         for k, method in enumerate(sorted(m for m in by_method if m != "_meta")):
             st = by_method[method]["stats"]
             rows.append([env_id if k == 0 else "", f"{steps:,}" if k == 0 else "", method,
-                         str(by_method[method]["seeds"]), _cell(st["cr"], ".3f") if known else "-",
-                         _cell(st["eum"], ".2f"), _cell(st["eum_gap"], ".2f") if known else "-",
-                         _cell(st["hv"], ".1f"),
+                         str(by_method[method]["seeds"]), _cell(st["cr"], ".3f") if known and single else "-",
+                         _cell(st["eum"], ".3f"), _cell(st["eum_gap"], ".3f") if known else "-",
+                         _cell(st["hv"], ".1f") if single else "-",
                          f"{by_method[method]['reached']}/{by_method[method]['seeds']}"])
     return markdown_table(["environment", "steps", "method", "seeds", "CR", "EUM", "EUM gap to optimum", "HV",
-                           "reached target"], rows) + "\n"
+                           "seeds that reached 95 % of the optimal EUM"], rows) + "\n"
 
 
 def render(summary: dict[str, dict[str, dict[str, Any]]], quick: bool, info: dict[str, Any]) -> str:
@@ -294,14 +309,18 @@ def render(summary: dict[str, dict[str, dict[str, Any]]], quick: bool, info: dic
              "Generated by `mope benchmark` from every finished run in its folder. The pieces that trained them "
              "(machine, date, wall time, command):", "",
              *(f"* {p['machine']}; {p['date']}; {p['wall_s']:.0f} s: `{p['command']}`" for p in pieces), "",
-             "Each cell: mean [bootstrap 95% CI] over seeds of the final evaluation. Target: CR = 1 where the front "
-             "is known, else 95 % of the best final EUM of any method; steps to it are the mean over the seeds "
-             "that reached it (count in the last column)."]
+             "Each cell: mean [bootstrap 95% CI] over seeds of the final evaluation. Target: 95 % of the optimal "
+             "EUM where the front is known, else of the best final EUM of any method (5 % of its size below it); "
+             "steps and training seconds to it, and to CR = 1, are the means over the seeds that reached them "
+             "(the count of seeds that reached the target is the last column)."]
     for env_id, by_method in summary.items():
         meta = by_method["_meta"]
         b = BENCH_ENVS[env_id]
-        cols = [c for c in COLUMNS if meta["known_front"] or c[0] not in ("cr", "optimal_share", "eum_gap")]
-        header = ["method", "seeds", *(c[1] for c in cols), "reached target"]
+        stochastic = meta.get("stochastic", False)
+        cols = [c for c in COLUMNS if (meta["known_front"] or c[0] not in ("cr", "optimal_share", "eum_gap",
+                                                                          "steps_to_cr1"))
+                and not (stochastic and c[0] in SINGLE_OUTCOME_COLUMNS)]
+        header = ["method", "seeds", *(c[1] for c in cols), "seeds that reached the target"]
         env_ratio = by_method.get("envelope")
         rows = []
         for method, s in by_method.items():
@@ -311,8 +330,16 @@ def render(summary: dict[str, dict[str, dict[str, Any]]], quick: bool, info: dic
                          f"{s['reached']}/{s['seeds']}"])
         budget = f"{meta['steps']:,} steps per run" + ("" if meta["steps"] == b.steps else
                                                         f" (the full benchmark's: {b.steps:,})")
+        target = meta.get("target_eum", math.nan)
+        note = [f"Target EUM: {target:.3f}" + (f" (95 % of the optimal {meta['optimal_eum']:.3f})"
+                                                if math.isfinite(meta.get("optimal_eum", math.nan)) else
+                                                " (95 % of the best final EUM)") + "."] if math.isfinite(target) else []
+        if stochastic:
+            note.append("Stochastic dynamics: each preference is evaluated with one episode, so EUM (an unbiased "
+                        "estimate of the expected utility) is reported, and CR, the optimal share and HV, which "
+                        "would compare single outcomes with a front of expected returns, are not.")
         lines += ["", f"## {env_id}", "", f"Budget: {budget}; the full budget's source: {b.source}.", "",
-                  markdown_table(header, rows)]
+                  *([" ".join(note), ""] if note else []), markdown_table(header, rows)]
         if env_ratio is not None:
             ratios = []
             for method, s in by_method.items():

@@ -207,11 +207,9 @@ class RunSettings:
 class Config:
     """All settings of one training run: the learner's hyperparameters, and ``run`` (:class:`RunSettings`).
 
-    Hyperparameters are grouped as: task, EQL core, prioritized replay, experience exploration (EE),
-    preference exploration (PE), demonstrations, and the experimental options the studies did not adopt.
-    ``algo`` is derived from the two exploration switches. Every setting, those of ``run`` included, is one flat
-    key for ``Config(**kwargs)``, ``--set KEY=VALUE``, sweep specs and ``config.json``; in code, run settings are
-    read as ``config.run.eval_every``.
+    Grouped as task, EQL core, prioritized replay, EE, PE, demonstrations, and the options the studies did not
+    adopt; ``algo`` follows from the two exploration switches. Every setting, ``run``'s included, is one flat key
+    for ``Config(**kwargs)``, ``--set KEY=VALUE``, sweep specs and ``config.json`` (in code: ``config.run.X``).
     """
 
     # --- task ------------------------------------------------------------------------------------------
@@ -317,15 +315,12 @@ class Config:
     demo_pretrain_steps: int = 0
     #: Share of every batch drawn uniformly from the demonstrations (0: they compete in prioritized replay).
     demo_batch_share: float = 0.0
-    #: Random roll-in of scripted demonstrations: each episode starts with U{0..demo_roll_in} uniformly random
-    #: actions, not recorded, before the demonstrator takes over, so the demonstrations also cover states that the
-    #: demonstrator never reaches from a reset (0: every episode is the demonstrator's from its reset). Not in the
-    #: robot game's recipe: 30 gave fewer wins there (docs/results/game-study).
+    #: Scripted demonstrations start after U{0..demo_roll_in} random actions (not recorded), to show states the
+    #: demonstrator never reaches from a reset; 0: none (on the robot game 30 cost wins: docs/results/game-study).
     demo_roll_in: int = 0
 
     # --- experimental: tried against the mirrored map's divergence, not adopted (off; docs/design.md) ---------
-    #: H, heads of the convex head whose minimum is Q (Maxmin Q-learning, Lan et al. 2020); 1: a single head.
-    #: The conditioned head has one head whatever this says.
+    #: H, heads of the convex head whose minimum is Q (Maxmin, Lan et al. 2020); 1: one head (always, conditioned).
     n_critics: int = 1
     #: Within the component loss, weight of the pull of every component toward its nearest target (0: off).
     component_anchor_weight: float = 0.0

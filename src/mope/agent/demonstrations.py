@@ -343,13 +343,7 @@ def collect_demonstrations(env: gym.Env, policy: Policy | str, n_episodes: int,
     Raises:
         DemonstrationError: for an unknown policy name, a bad range or count, or an action out of range.
     """
-    if isinstance(n_episodes, bool) or not isinstance(n_episodes, int | np.integer) or n_episodes < 1:
-        raise DemonstrationError(f"n_episodes={n_episodes!r} is out of range: collect at least 1 episode")
-    if max_steps is not None and (isinstance(max_steps, bool) or not isinstance(max_steps, int | np.integer)
-                                  or max_steps < 1):
-        raise DemonstrationError(f"max_steps={max_steps!r} is out of range: use None or an integer >= 1")
-    if isinstance(roll_in, bool) or not isinstance(roll_in, int | np.integer) or roll_in < 0:
-        raise DemonstrationError(f"roll_in={roll_in!r} is out of range: use an integer >= 0")
+    _check_counts(n_episodes, max_steps, roll_in)
     if not isinstance(env.action_space, gym.spaces.Discrete):
         raise DemonstrationError(f"demonstrations need a Discrete action space, this environment has "
                                  f"{env.action_space}: wrap it (mope.envs.DiscreteActions)")
@@ -364,15 +358,7 @@ def collect_demonstrations(env: gym.Env, policy: Policy | str, n_episodes: int,
     roll_rng = np.random.default_rng(seed + 1) if roll_in else None  # its own stream: roll_in=0 changes nothing
     for i in range(n_episodes):
         pref = _draw_pref(rng, pref_range, m)
-        obs, _ = env.reset(seed=seed + i)
-        steps, done = 0, False
-        if roll_rng is not None:
-            for _ in range(int(roll_rng.integers(0, roll_in + 1))):
-                obs, _, terminated, truncated, _ = env.step(int(roll_rng.integers(n_actions)))
-                steps += 1
-                done = bool(terminated or truncated or (max_steps is not None and steps >= max_steps))
-                if done:
-                    break
+        obs, steps, done = _roll_in(env, env.reset(seed=seed + i)[0], roll_rng, roll_in, n_actions, max_steps)
         while not done:
             a = _as_action(act(obs, env), n_actions, label)
             next_obs, reward, terminated, truncated, _ = env.step(a)
@@ -386,6 +372,33 @@ def collect_demonstrations(env: gym.Env, policy: Policy | str, n_episodes: int,
         raise DemonstrationError(f"every one of the {n_episodes} episodes ended during its random roll-in "
                                  f"(roll_in={roll_in}): nothing was demonstrated; use a shorter roll-in")
     return Demonstrations(**{k: np.stack([np.asarray(v) for v in rows[k]]) for k in KEYS})
+
+
+def _check_counts(n_episodes: Any, max_steps: Any, roll_in: Any) -> None:
+    """One-line errors for a bad episode count, step cap or roll-in length."""
+    if isinstance(n_episodes, bool) or not isinstance(n_episodes, int | np.integer) or n_episodes < 1:
+        raise DemonstrationError(f"n_episodes={n_episodes!r} is out of range: collect at least 1 episode")
+    if max_steps is not None and (isinstance(max_steps, bool) or not isinstance(max_steps, int | np.integer)
+                                  or max_steps < 1):
+        raise DemonstrationError(f"max_steps={max_steps!r} is out of range: use None or an integer >= 1")
+    if isinstance(roll_in, bool) or not isinstance(roll_in, int | np.integer) or roll_in < 0:
+        raise DemonstrationError(f"roll_in={roll_in!r} is out of range: use an integer >= 0")
+
+
+def _roll_in(env: gym.Env, obs: Any, rng: np.random.Generator | None, roll_in: int, n_actions: int,
+             max_steps: int | None) -> tuple[Any, int, bool]:
+    """Up to ``U{0..roll_in}`` uniformly random steps from ``obs`` (none without ``rng``): the observation the
+    demonstrator starts from, the steps taken and whether the episode already ended."""
+    steps, done = 0, False
+    if rng is None:
+        return obs, steps, done
+    for _ in range(int(rng.integers(0, roll_in + 1))):
+        obs, _, terminated, truncated, _ = env.step(int(rng.integers(n_actions)))
+        steps += 1
+        done = bool(terminated or truncated or (max_steps is not None and steps >= max_steps))
+        if done:
+            break
+    return obs, steps, done
 
 
 def _resolve(env: gym.Env, policy: Policy | str, pref_range: tuple[float, float] | None

@@ -445,23 +445,34 @@ def run_benchmark(out: str | Path, envs: list[str] | None = None, methods: list[
                 raise MopeError(f"{len(failed)} of {len(jobs)} runs failed, the first: {failed[0]['name']} "
                                 f"({failed[0]['error']}); see {out / failed[0]['name'] / 'error.txt'}")
         wall = time.perf_counter() - t0
-        info = _machine(wall, command)
-        pieces_file = out / "pieces.jsonl"
-        if jobs and any(r["action"] != "skipped" for r in records.values()):
-            with open(pieces_file, "a") as f:
-                f.write(json.dumps(info) + "\n")
-        pieces = ([json.loads(line) for line in pieces_file.read_text().splitlines() if line.strip()]
-                  if pieces_file.is_file() else [dict(info)])
-        info["pieces"] = pieces
-        all_jobs = finished_runs(out)
-        summary = summarise(out, all_jobs)
-        dest.mkdir(parents=True, exist_ok=True)
-        text = render(summary, quick, info)
-        (dest / "benchmark.md").write_text(text)
-        (dest / "readme_table.md").write_text(readme_table(summary))
-        (dest / "benchmark.json").write_text(json.dumps({"info": info, "summary": summary}, indent=1, default=_json))
-        figures = plot_curves(out, all_jobs, dest)
+        trained = bool(jobs) and any(r["action"] != "skipped" for r in records.values())
+        summary, text, figures = write_report(out, dest, _machine(wall, command), quick, trained)
     return {"summary": summary, "table": text, "out": dest, "wall_s": wall, "figures": figures}
+
+
+def write_report(out: Path, dest: Path, info: dict[str, Any], quick: bool, new_piece: bool
+                 ) -> tuple[dict[str, Any], str, list[Path]]:
+    """Write ``benchmark.md``, ``benchmark.json``, ``readme_table.md`` and the figures into ``dest`` from every
+    finished run in ``out``; with ``new_piece``, first append ``info`` (this call's machine, date, wall time and
+    command) to ``out/pieces.jsonl``.
+
+    Returns:
+        ``(summary, markdown, figure paths)``.
+    """
+    pieces_file = out / "pieces.jsonl"
+    if new_piece:
+        with open(pieces_file, "a") as f:
+            f.write(json.dumps(info) + "\n")
+    info["pieces"] = ([json.loads(line) for line in pieces_file.read_text().splitlines() if line.strip()]
+                      if pieces_file.is_file() else [dict(info)])
+    all_jobs = finished_runs(out)
+    summary = summarise(out, all_jobs)
+    dest.mkdir(parents=True, exist_ok=True)
+    text = render(summary, quick, info)
+    (dest / "benchmark.md").write_text(text)
+    (dest / "readme_table.md").write_text(readme_table(summary))
+    (dest / "benchmark.json").write_text(json.dumps({"info": info, "summary": summary}, indent=1, default=_json))
+    return summary, text, plot_curves(out, all_jobs, dest)
 
 
 def _machine(wall_s: float, command: str) -> dict[str, Any]:

@@ -498,4 +498,5 @@ def _json(x: Any) -> Any:
     return str(x)
 
 
-__all__ = ["BENCH_ENVS", "METHODS", "EnvBench", "benchmark_jobs", "run_benchmark"]
+__all__ = ["BENCH_ENVS", "METHODS", "EnvBench", "benchmark_jobs", "finished_runs", "readme_table", "run_benchmark",
+           "write_report"]

@@ -158,6 +158,11 @@ GITIGNORE = ("# written by mope benchmark: a committed piece keeps each run's co
              ".mope*\n*/*\n" + "".join(f"!*/{name}\n" for name in COMPACT_FILES))
 
 
+def _method(job: Job) -> str:
+    """The method of a benchmark job, from its name ``ENV-METHOD-sSEED``."""
+    return job.name[len(job.payload["env_id"].replace("/", "_")) + 1:].rpartition("-s")[0]
+
+
 def _run_identity(folder: Path) -> tuple[str, str, int, int] | None:
     """``(env_id, method, seed, total_steps)`` of a finished benchmark run folder, or None for any other folder."""
     if not (folder / "summary.json").is_file():
@@ -170,8 +175,7 @@ def _run_identity(folder: Path) -> tuple[str, str, int, int] | None:
     env_id = payload.get("env_id")
     if env_id not in BENCH_ENVS:
         return None
-    rest = folder.name[len(env_id.replace("/", "_")) + 1:]
-    method, _, seed = rest.rpartition("-s")
+    method, seed = _method(Job(folder.name, "", {"env_id": env_id})), folder.name.rpartition("-s")[2]
     if not folder.name.startswith(env_id.replace("/", "_") + "-") or method not in METHODS or not seed.isdigit():
         return None
     return env_id, method, int(seed), int(payload["total_steps"])
@@ -226,7 +230,7 @@ def summarise(out: Path, jobs: list[Job]) -> dict[str, dict[str, dict[str, Any]]
     runs: dict[str, dict[str, list[dict[str, Any]]]] = {}
     for job in jobs:
         env_id = job.payload["env_id"]
-        method = job.name[len(env_id.replace("/", "_")) + 1:].rsplit("-s", 1)[0]
+        method = _method(job)
         runs.setdefault(env_id, {}).setdefault(method, []).append(_read_run(out / job.name))
     table: dict[str, dict[str, dict[str, Any]]] = {}
     for env_id, by_method in runs.items():
@@ -367,7 +371,7 @@ def plot_curves(out: Path, jobs: list[Job], dest: Path) -> list[Path]:
     by_env: dict[str, dict[str, list[list[dict[str, float]]]]] = {}
     for job in jobs:
         env_id = job.payload["env_id"]
-        method = job.name[len(env_id.replace("/", "_")) + 1:].rsplit("-s", 1)[0]
+        method = _method(job)
         by_env.setdefault(env_id, {}).setdefault(method, []).append(_read_run(out / job.name)["rows"])
     for env_id, by_method in by_env.items():
         known = any(np.isfinite(rows[-1].get("cr", math.nan)) for rs in by_method.values() for rows in rs)

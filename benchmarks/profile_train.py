@@ -39,7 +39,7 @@ BUCKETS: dict[str, list[tuple[str, str]]] = {
     "grad-norm clipping": [("clip_grad.py", "_no_grad_wrapper")],
     "EQL loss / TD / priority": [("losses.py", "eql_loss"), ("losses.py", "preference_interval_td"),
                                  ("losses.py", "priority")],
-    "discriminator step (forward + backward + Adam)": [("agent.py", "_discriminator_step")],
+    "discriminator loss (forward; its backward and Adam are in the rows above)": [("agent.py", "_discriminator_loss")],
     "replay sample (sum-tree find, gather)": [("replay.py", "sample")],
     "replay update_priorities (sum tree)": [("replay.py", "update_priorities")],
     "replay add (sum tree)": [("replay.py", "add")],
@@ -121,8 +121,6 @@ def profile(algo: str, steps: int, learning_starts: int, warmup: int, top: int) 
             t = env_all - ff_env
         else:
             t = sum(outermost(stats, frag, name) for frag, name in keys)
-            if bucket.startswith(("backward", "optimizer step", "zero_grad")):  # the Q-network's only
-                t -= sum(from_caller(stats, frag, name, "agent.py", "_discriminator_step") for frag, name in keys)
         accounted += t
         lines.append(f"  {bucket:<70s} {t:7.2f} s  {100 * t / total:5.1f} %")
     lines.append(f"  {'rest (Python glue in update/train: gather/expand/view, isfinite, .item(), ...)':<70s} "

@@ -18,6 +18,7 @@ from mope.agent.losses import (
     large_margin_loss,
     mix_behaviour_returns,
     mutual_information_bonus,
+    objective_sum,
     preference_interval_td,
     priority,
     taken_action_q,
@@ -367,3 +368,23 @@ def test_large_margin_loss_rejects_bad_shapes_and_negative_margin() -> None:
         large_margin_loss(MARGIN_Q, MARGIN_A, margin=0.5, mask=torch.ones(3, dtype=torch.bool))
     with pytest.raises(ValueError, match="margin=-0.1"):
         large_margin_loss(MARGIN_Q, MARGIN_A, margin=-0.1)
+
+
+@pytest.mark.parametrize("m", [1, 2, 3, 6])
+def test_objective_sum_is_the_sum_over_the_last_axis(m: int) -> None:
+    x = torch.randn(7, 5, m, generator=torch.Generator().manual_seed(m))
+    torch.testing.assert_close(objective_sum(x), x.sum(-1))
+    if m <= 2:
+        assert torch.equal(objective_sum(x), x.sum(-1))
+
+
+def test_denormals_are_flushed_inside_the_block_and_the_mode_restored() -> None:
+    from mope.agent.agent import denormals_are_flushed, flushed_denormals
+
+    assert not denormals_are_flushed()
+    tiny = torch.tensor([1e-39])
+    assert tiny.mul(1.0)[0] > 0  # a denormal survives arithmetic outside
+    with flushed_denormals():
+        assert denormals_are_flushed()
+        assert tiny.mul(1.0)[0] == 0
+    assert not denormals_are_flushed() and tiny.mul(1.0)[0] > 0

@@ -311,3 +311,21 @@ def test_the_fast_double_q_target_equals_the_general_envelope_target(monkeypatch
     general = targets.one_step_target(agent.q_net, agent.target_net, agent.buffer, batch.indices, w, acting, c)
     assert fast.shape == general.shape == w.shape
     assert torch.allclose(fast, general, atol=1e-5)
+
+
+@pytest.mark.parametrize("head", ["convex", "convex2", "conditioned"])
+def test_greedy_is_the_argmax_of_the_scalarised_q(head: str) -> None:
+    """``greedy`` (acting, evaluation) is ``argmax_a w^T Q(s, a, w)`` of ``forward``: the convex head's one-head
+    shortcut scores every (a, c) at once instead of selecting components first."""
+    torch.manual_seed(3)
+    space = gym.spaces.Box(low=0.0, high=1.0, shape=(4,), dtype=np.float32)
+    heads = 2 if head == "convex2" else 1
+    net: nn.Module = (QNetwork(space, 5, 3, (32, 32)) if head == "conditioned"
+                      else ConvexQNetwork(space, 5, 3, (32, 32), n_components=6, n_critics=heads))
+    obs = torch.rand(200, 4)
+    w = torch.distributions.Dirichlet(torch.ones(3)).sample((200,))
+    with torch.no_grad():
+        want = torch.einsum("bm,bam->ba", w, net(obs, w)).argmax(dim=1)
+        got = net.greedy(obs, w)
+    assert got.shape == (200,) and torch.equal(got, want)
+    assert len(set(got.tolist())) > 1

@@ -42,6 +42,22 @@ def test_sumtree_update_with_duplicate_indices_stays_consistent() -> None:
     assert t.find(np.array([0.4, 0.6, 2.6, 9.4, 9.6])).tolist() == [0, 1, 2, 2, 3]
 
 
+def test_sumtree_single_leaf_updates_equal_a_rebuilt_tree() -> None:
+    """Collection updates one leaf at a time (a scalar walk to the root); interleaved with batched updates, every
+    internal node must still be the exact sum of its two children."""
+    rng = np.random.default_rng(5)
+    tree = SumTree(37)
+    for k in range(300):
+        if k % 3:
+            tree.update(rng.integers(0, 37, 1), rng.random(1))
+        else:
+            tree.update(rng.integers(0, 37, 9), rng.random(9))
+    t = tree.tree
+    internal = np.arange(1, tree.size)
+    assert np.array_equal(t[internal], t[2 * internal] + t[2 * internal + 1])
+    assert tree.total == pytest.approx(tree.get(np.arange(37)).sum())
+
+
 def test_sumtree_capacity_not_power_of_two() -> None:
     t = SumTree(5)
     assert t.size == 8 and t.depth == 3

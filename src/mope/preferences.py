@@ -138,8 +138,9 @@ def sample_neighbours(centers: np.ndarray, n: int, sigma: float, rng: np.random.
 
     Each neighbour is ``center + r * u`` with ``u`` a uniform unit direction in the simplex's plane
     (entries summing to 0) and ``r = sigma * U^(1/(m-1))``, i.e. uniform in the (m-1)-ball around the
-    center. A candidate that leaves the simplex is redrawn (up to 4 tries, vectorised); if all tries leave
-    it (only near the boundary), the last candidate is reflected back across the facets it crossed. Reflection
+    center. A candidate that leaves the simplex is redrawn (up to 4 tries in all; only the rejected ones are
+    drawn again); if all tries leave it (only near the boundary), the last candidate is reflected back across
+    the facets it crossed. Reflection
     across a facet never moves a point farther from a center inside the simplex, so every result lies on the
     simplex and within ``sigma`` of its center. The result is exactly uniform on the ball-simplex intersection
     away from the boundary and close to uniform near it (nothing piles up on the center).
@@ -157,24 +158,41 @@ def sample_neighbours(centers: np.ndarray, n: int, sigma: float, rng: np.random.
     b, m = centers.shape
     if m == 1:
         return np.ones((b, n, 1))
-    tries = 4
-    g = rng.standard_normal(size=(tries, b, n, m))
-    g -= g.mean(axis=-1, keepdims=True)  # project onto the plane sum(x) = 0
-    u = g / np.maximum(np.linalg.norm(g, axis=-1, keepdims=True), 1e-12)
-    r = sigma * rng.random(size=(tries, b, n, 1)) ** (1.0 / (m - 1))
-    cand = centers[None, :, None, :] + r * u
-    valid = np.all(cand >= 0.0, axis=-1)  # (tries, b, n)
-    first = np.where(valid.any(axis=0), np.argmax(valid, axis=0), tries - 1)  # first valid try, else the last
-    pick = np.take_along_axis(cand, first[None, ..., None], axis=0)[0]
-    for _ in range(2 * m):  # reflect across the most violated facet x_k = 0 until inside (a few rounds at most)
+    # Neighbour-major layout (m, b * n): the sums over the m objectives are then m-row sums, much faster in numpy
+    # than reductions over a short last axis.
+    flat = np.repeat(centers, n, axis=0).T.copy()  # (m, b * n): one column per neighbour
+    pick = flat + _ball_offsets(m, flat.shape[1], sigma, rng)
+    todo = np.flatnonzero(pick.min(axis=0) < 0.0)
+    for _ in range(3):  # redraw the candidates that left the simplex (3 more tries; rare away from the boundary)
+        if not len(todo):
+            break
+        pick[:, todo] = flat[:, todo] + _ball_offsets(m, len(todo), sigma, rng)
+        todo = todo[pick[:, todo].min(axis=0) < 0.0]
+    if len(todo):
+        pick[:, todo] = _reflect_inside(pick[:, todo].T).T
+    pick = np.clip(pick, 0.0, None)
+    return (pick / pick.sum(axis=0)).T.reshape(b, n, m)
+
+
+def _ball_offsets(m: int, k: int, sigma: float, rng: np.random.Generator) -> np.ndarray:
+    """``(m, k)``: ``k`` offsets uniform in the (m-1)-ball of radius ``sigma`` within the plane ``sum(x) = 0``."""
+    g = rng.standard_normal(size=(m, k))
+    g -= g.mean(axis=0)  # project onto the plane sum(x) = 0
+    u = g / np.maximum(np.sqrt((g * g).sum(axis=0)), 1e-12)
+    return u * (sigma * rng.random(size=k) ** (1.0 / (m - 1)))
+
+
+def _reflect_inside(pick: np.ndarray) -> np.ndarray:
+    """Reflect points of the plane ``sum(x) = 1`` across the most violated facet ``x_k = 0`` until inside."""
+    m = pick.shape[-1]
+    for _ in range(2 * m):  # a few rounds at most
         k = np.argmin(pick, axis=-1)
-        low = np.take_along_axis(pick, k[..., None], axis=-1)  # (b, n, 1)
+        low = np.take_along_axis(pick, k[..., None], axis=-1)  # (k, 1)
         if np.all(low >= 0):
             break
         normal = np.eye(m)[k] - 1.0 / m  # facet normal within the simplex plane
         pick = np.where(low < 0, pick - 2.0 * low / (1.0 - 1.0 / m) * normal, pick)
-    pick = np.clip(pick, 0.0, None)
-    return pick / pick.sum(axis=-1, keepdims=True)
+    return pick
 
 
 class PreferencePartition:

@@ -26,9 +26,12 @@ The loop that strings these together, with evaluation, progress, checkpoints and
 
 from __future__ import annotations
 
+import contextlib
 import copy
+import functools
 import math
-from typing import Any
+from collections.abc import Callable, Iterator
+from typing import Any, TypeVar
 
 import gymnasium as gym
 import numpy as np
@@ -88,18 +91,21 @@ def crossed(step: int, n: int, every: int) -> bool:
 
 
 def update_statistics(loss: torch.Tensor, parts: dict[str, torch.Tensor], td: torch.Tensor, q: torch.Tensor,
-                      w: torch.Tensor, bonus: torch.Tensor | None, disc_loss: float | None,
+                      w: torch.Tensor, bonus: torch.Tensor | None, disc_loss: torch.Tensor | None,
                       reward_scale: float = 1.0) -> dict[str, float]:
     """What one update reports: the loss and its parts, |TD| (eq. 5), the scalarised Q of the taken actions,
     the MI bonus (eq. 6) and the discriminator's loss. |TD| and Q are in the environment's units (divided by
-    ``reward_scale``); the losses are in the learner's."""
-    q_scal = (w * q).sum(-1) / reward_scale
-    stats = {"loss": loss.item(), **{k: v.mean().item() for k, v in parts.items()},
-             "td_abs": td.abs().mean().item() / reward_scale, "q_mean": q_scal.mean().item(),
-             "q_max": q_scal.max().item()}
+    ``reward_scale``); the losses are in the learner's. One host transfer for all of them."""
+    q_scal = losses.objective_sum(w * q)
+    values = torch.stack([loss.detach(), *(v.detach().mean() for v in parts.values()), td.abs().mean(),
+                          q_scal.mean(), q_scal.max(),
+                          *(() if bonus is None or disc_loss is None else (bonus.mean(), disc_loss.detach()))]).tolist()
+    stats = {"loss": values[0], **dict(zip(parts, values[1:], strict=False))}
+    k = 1 + len(parts)
+    stats.update(td_abs=values[k] / reward_scale, q_mean=values[k + 1] / reward_scale,
+                 q_max=values[k + 2] / reward_scale)
     if bonus is not None and disc_loss is not None:
-        stats["disc_loss"] = disc_loss
-        stats["mi_bonus"] = bonus.mean().item()
+        stats["mi_bonus"], stats["disc_loss"] = values[k + 3], values[k + 4]
     return stats
 
 
@@ -114,6 +120,41 @@ def check_finite(loss: torch.Tensor, q: torch.Tensor, y: torch.Tensor, step: int
     else:
         what = f"the EQL loss is {loss.item()}"
     raise TrainingDivergedError(f"training diverged at step {step}: {what}")
+
+
+def denormals_are_flushed() -> bool:
+    """Whether the CPU flushes denormal floats to zero now (probed: a denormal times 1 is then 0)."""
+    return bool(torch.tensor([1e-39]).mul_(1.0)[0] == 0)
+
+
+@contextlib.contextmanager
+def flushed_denormals() -> Iterator[None]:
+    """Flush denormal floats (below 1.2e-38) to zero on the CPU while the block runs, then restore the mode.
+
+    Adam's second moments of weights whose gradients are (nearly) zero, such as a dead ReLU unit's, decay
+    geometrically into the denormal range, where x86 arithmetic is many times slower: on Deep-Sea-Treasure
+    the Q-network's Adam step took 0.98 ms with denormals and 0.31 ms without (``benchmarks/bench_update.py``).
+    Values that small are below anything the update can resolve (float32's epsilon at 1 is 1.2e-7).
+    """
+    was = denormals_are_flushed()
+    torch.set_flush_denormal(True)
+    try:
+        yield
+    finally:
+        if not was:
+            torch.set_flush_denormal(False)
+
+
+_F = TypeVar("_F", bound=Callable[..., Any])
+
+
+def with_flushed_denormals(fn: _F) -> _F:
+    """Run ``fn`` under :func:`flushed_denormals`."""
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        with flushed_denormals():
+            return fn(*args, **kwargs)
+    return wrapper  # type: ignore[return-value]
 
 
 def demonstrations_for(cfg: Config, env: gym.Env) -> Demonstrations | None:
@@ -239,7 +280,8 @@ class MoPE(BaseAgent):
         self.target_net = q_network()
         self.target_net.load_state_dict(self.q_net.state_dict())
         self.target_net.requires_grad_(False)
-        self.optimizer = torch.optim.Adam(self.q_net.parameters(), lr=cfg.learning_rate, foreach=True)
+        self._q_params, self._target_params = list(self.q_net.parameters()), list(self.target_net.parameters())
+        self.optimizer = torch.optim.Adam(self._q_params, lr=cfg.learning_rate, fused=True)
 
         self.pref_sampler = PreferenceSampler(self.m, cfg.n_intervals, cfg.preference_exploration,
                                               cfg.pe_count_offset)
@@ -249,7 +291,7 @@ class MoPE(BaseAgent):
             self.discriminator = Discriminator(spec.obs_space, self.pref_sampler.partition.n_cells,
                                                cfg.disc_hidden, cfg.obs_encoding).to(self.device)
             self.disc_optimizer = torch.optim.Adam(self.discriminator.parameters(), lr=cfg.disc_learning_rate,
-                                                   foreach=True)
+                                                   fused=True)
 
         self.q_low, self.q_high = return_bounds(self.env, cfg.gamma)
         # The targets' clamp, in the learner's units (rewards times reward_scale).
@@ -304,8 +346,7 @@ class MoPE(BaseAgent):
     def _polyak(self) -> None:
         if self.config.target_tau is not None:
             with torch.no_grad():
-                torch._foreach_lerp_(list(self.target_net.parameters()), list(self.q_net.parameters()),
-                                     self.config.target_tau)
+                torch._foreach_lerp_(self._target_params, self._q_params, self.config.target_tau)
 
     def end_step(self) -> None:
         """Housekeeping after a collection step: the hard target-network copy (every ``target_update_freq`` env
@@ -321,8 +362,10 @@ class MoPE(BaseAgent):
         """Step 3: preferences of the training rows, ``(B, N_omega, m)`` (:func:`relabel_preferences`)."""
         return relabel_preferences(self.config, acting_prefs, self.m, self.rng)
 
+    @with_flushed_denormals
     def update(self) -> dict[str, float]:
-        """Steps 2-5 of the module docstring: one gradient step on a sampled batch; returns its statistics."""
+        """Steps 2-5 of the module docstring: one gradient step on a sampled batch; returns its statistics.
+        Denormal floats are flushed to zero meanwhile (:func:`flushed_denormals`)."""
         c = self.config
         batch = self.buffer.sample(c.batch_size, self.rng, self._per_beta(),                      # 2
                                    round(c.batch_size * c.demo_batch_share))
@@ -334,9 +377,9 @@ class MoPE(BaseAgent):
         q, loss_rows, parts = self._eql_loss(obs, actions, w, y, demo)                             # 4: eq. 4 + J_E
         loss = (self._tensor(batch.weights) * loss_rows).mean()
         check_finite(loss, q, y, self.global_step)
-        self._gradient_step(loss)
+        bonus, disc_loss = self._discriminator_loss(obs, batch.prefs)                              # 5: eq. 6
+        self._gradient_step(loss, disc_loss)  # 4, and 5's discriminator step: one Adam step each
         td = losses.preference_interval_td(q.detach(), y, w)                                      # 5: eq. 5
-        bonus, disc_loss = self._discriminator_step(obs, batch.prefs)                              # 5: eq. 6
         self._set_priorities(batch, losses.priority(td, bonus, c.mi_alpha, c.per_eps, c.per_alpha))  # 5: eq. 7
         self.last_losses = update_statistics(loss, parts, td, q.detach(), w, bonus, disc_loss, c.reward_scale)
         return self.last_losses
@@ -409,12 +452,17 @@ class MoPE(BaseAgent):
                                              self._tensor(fresh, torch.bool), c.return_mix)
         return y
 
-    def _gradient_step(self, loss: torch.Tensor) -> None:
-        self.optimizer.zero_grad(set_to_none=True)
-        loss.backward()
+    def _gradient_step(self, loss: torch.Tensor, disc_loss: torch.Tensor | None = None) -> None:
+        """One Adam step of the Q-network on ``loss`` (gradient norm clipped) and, given ``disc_loss``, one of the
+        discriminator; a single backward pass serves both, since their graphs share no parameter."""
+        optimizers = [self.optimizer] + ([self.disc_optimizer] if self.disc_optimizer and disc_loss is not None else [])
+        for opt in optimizers:
+            opt.zero_grad(set_to_none=True)
+        (loss if disc_loss is None else loss + disc_loss).backward()
         if self.config.max_grad_norm is not None:
-            nn.utils.clip_grad_norm_(self.q_net.parameters(), self.config.max_grad_norm)
-        self.optimizer.step()
+            nn.utils.clip_grad_norm_(self._q_params, self.config.max_grad_norm)
+        for opt in optimizers:
+            opt.step()
 
     def _set_priorities(self, batch: Batch, priorities: np.ndarray) -> None:
         if not self.buffer.prioritized:
@@ -424,21 +472,17 @@ class MoPE(BaseAgent):
                                         "or inf")
         self.buffer.update_priorities(batch.indices, priorities)
 
-    def _discriminator_step(self, obs: torch.Tensor, acting_prefs: np.ndarray
-                            ) -> tuple[torch.Tensor | None, float | None]:
-        """Eq. 6's term ``log q_phi(w|s) - log p(w)`` for the batch, then one cross-entropy step of q_phi on
-        ``(s, cell(w_b))``; ``(None, None)`` without experience exploration."""
-        if self.discriminator is None or self.disc_optimizer is None:
+    def _discriminator_loss(self, obs: torch.Tensor, acting_prefs: np.ndarray
+                            ) -> tuple[torch.Tensor | None, torch.Tensor | None]:
+        """Eq. 6's term ``log q_phi(w|s) - log p(w)`` for the batch and q_phi's cross-entropy loss on ``(s, cell(w_b))``
+        (stepped in :meth:`_gradient_step`); ``(None, None)`` without experience exploration."""
+        if self.discriminator is None:
             return None, None
         cells_np = self.pref_sampler.partition.cell_of(acting_prefs)
         log_q = self.discriminator.log_prob(obs, self._tensor(cells_np, torch.int64))
         log_p = self._tensor(self.pref_sampler.log_prob_cells(cells_np))
-        bonus = losses.mutual_information_bonus(log_q.detach(), log_p)
-        disc_loss = -log_q.mean()
-        self.disc_optimizer.zero_grad(set_to_none=True)
-        disc_loss.backward()
-        self.disc_optimizer.step()
-        return bonus, disc_loss.item()
+        return losses.mutual_information_bonus(log_q.detach(), log_p), -log_q.mean()
+
 
 class EQL(MoPE):
     """Envelope Q-learning (Yang et al. 2019): MoPE with experience and preference exploration switched off."""

@@ -45,6 +45,8 @@ class BaseAgent(AgentState):
     global_step: int
     #: Which rows of the latest epsilon-greedy :meth:`act` took a random action.
     _explored: np.ndarray | None = None
+    #: The greedy action of each row of the latest :meth:`act` (-1 where it was not computed).
+    _greedy: np.ndarray | None = None
 
     @property
     def algo(self) -> str:
@@ -70,9 +72,7 @@ class BaseAgent(AgentState):
     @torch.inference_mode()
     def greedy_actions(self, obs: np.ndarray, prefs: np.ndarray) -> np.ndarray:
         """Greedy actions ``argmax_a w^T Q(s, a, w)`` for a batch (no input checks; used in rollouts)."""
-        w = self._tensor(prefs)
-        q = self.q_net(self._tensor(obs), w)
-        return torch.einsum("bm,bam->ba", w, q).argmax(dim=1).cpu().numpy()
+        return self.q_net.greedy(self._tensor(obs), self._tensor(prefs)).cpu().numpy()
 
     def act(self, obs: Any, pref: Any, greedy: bool = True) -> int | np.ndarray:
         """Choose actions under a preference.
@@ -99,9 +99,14 @@ class BaseAgent(AgentState):
         if not greedy:
             explore = self.rng.random(len(obs_b)) < self.epsilon
             actions[explore] = self.rng.integers(0, self.n_actions, int(explore.sum()))
-        if not explore.all():
-            actions[~explore] = self.greedy_actions(obs_b[~explore], prefs[~explore])
+        # With return_mix, collection also needs the explored rows' greedy actions: one pass over every row.
+        need = np.ones(len(obs_b), dtype=bool) if not greedy and self.config.return_mix else ~explore
+        best = np.full(len(obs_b), -1, dtype=np.int64)
+        if need.any():
+            best[need] = self.greedy_actions(obs_b[need], prefs[need])
+            actions[~explore] = best[~explore]
         self._explored = explore  # which rows took a random action (collect_step's greedy-tail trace reads it)
+        self._greedy = best  # the greedy action of each row (-1: not computed)
         return int(actions[0]) if single else actions
 
     # ---------------------------------------------------------------------------------------------------------
@@ -115,7 +120,7 @@ class BaseAgent(AgentState):
         eps = self._episodes
         obs = np.stack([np.asarray(ep.obs) for ep in eps])
         prefs = np.stack([ep.pref for ep in eps])
-        self._explored = None
+        self._explored = self._greedy = None
         actions = np.asarray(self.act(obs, prefs, greedy=False))
         steps = [env.step(int(a)) for env, a in zip(self.envs, actions, strict=True)]
         next_obs = np.stack([np.asarray(s[0]) for s in steps])
@@ -144,7 +149,12 @@ class BaseAgent(AgentState):
         explored = self._explored if self._explored is not None else np.ones(len(actions), dtype=bool)
         greedy = ~explored
         if explored.any():
-            greedy[explored] = actions[explored] == self.greedy_actions(obs[explored], prefs[explored])
+            best = self._greedy if self._greedy is not None else np.full(len(actions), -1)
+            missing = explored & (best < 0)  # act() did not compute them (a subclass's act, say)
+            if missing.any():
+                best = best.copy()
+                best[missing] = self.greedy_actions(obs[missing], prefs[missing])
+            greedy[explored] = actions[explored] == best[explored]
         return greedy
 
     @torch.no_grad()

@@ -11,6 +11,19 @@ import numpy as np
 import torch
 
 
+def objective_sum(x: torch.Tensor) -> torch.Tensor:
+    """The sum over the last axis (the m objectives), as m slices added in order.
+
+    The same sums as ``x.sum(-1)`` for m <= 2 and the same up to float rounding order beyond; on the CPU a
+    reduction over a short innermost axis is about 10x slower than m - 1 elementwise additions
+    (``benchmarks/bench_update.py``, issue: fast training).
+    """
+    total = x[..., 0]
+    for k in range(1, x.shape[-1]):
+        total = total + x[..., k]
+    return total
+
+
 def envelope_set(mode: str, row_prefs: torch.Tensor, acting_prefs: torch.Tensor) -> tuple[torch.Tensor, bool]:
     """The preferences the envelope max of eq. 4 runs over, ``(B, K, m)``, and whether it is an envelope at all.
 
@@ -176,8 +189,8 @@ def eql_loss(q: torch.Tensor, y: torch.Tensor, prefs: torch.Tensor, lb_weight: f
         ``(loss, l_a, l_b)``, each of shape ``(B,)``.
     """
     diff = y - q
-    l_a = diff.pow(2).sum(-1).mean(1)
-    l_b = (prefs * diff).sum(-1).abs().mean(1)
+    l_a = objective_sum(diff * diff).mean(1)
+    l_b = objective_sum(prefs * diff).abs().mean(1)
     return l_a + lb_weight * l_b, l_a, l_b
 
 
@@ -201,7 +214,10 @@ def component_loss(components: torch.Tensor, y: torch.Tensor, anchor_weight: flo
     Returns:
         ``(B,)`` per-transition losses.
     """
-    dist = (components.unsqueeze(1) - y.unsqueeze(2)).pow(2).sum(-1)  # (B, N, C)
+    dist = None  # (B, N, C), summed objective by objective: m small (B, N, C) tensors, not one (B, N, C, m)
+    for k in range(components.shape[-1]):
+        d = components[..., k].unsqueeze(1) - y[..., k].unsqueeze(2)
+        dist = d * d if dist is None else dist + d * d
     loss = dist.min(dim=2).values.mean(dim=1)
     if anchor_weight:
         loss = loss + anchor_weight * dist.min(dim=1).values.mean(dim=1)
@@ -217,7 +233,7 @@ def preference_interval_td(q: torch.Tensor, y: torch.Tensor, prefs: torch.Tensor
     Returns:
         ``(B,)`` signed mean scalarised TD errors.
     """
-    return (prefs * (y - q)).sum(-1).mean(1)
+    return objective_sum(prefs * (y - q)).mean(1)
 
 
 def mutual_information_bonus(log_q: torch.Tensor, log_p: torch.Tensor) -> torch.Tensor:

@@ -158,6 +158,10 @@ class QNetwork(nn.Module):
         """Same as :meth:`forward` for already encoded observations (lets a batch encode once)."""
         return self.net(torch.cat([feats, pref], dim=1)).view(-1, self.n_actions, self.n_objectives)
 
+    def greedy(self, obs: torch.Tensor, pref: torch.Tensor) -> torch.Tensor:
+        """``(R,)`` greedy actions ``argmax_a w^T Q(s, a, w)`` of ``R`` observations, each under its own ``(R, m)``."""
+        return torch.einsum("bm,bam->ba", pref, self(obs, pref)).argmax(dim=1)
+
     def forward_prefs(self, obs: torch.Tensor, prefs: torch.Tensor) -> torch.Tensor:
         """Q-values of each observation under several preferences, in one pass of ``B * K`` rows.
 
@@ -264,16 +268,23 @@ class ConvexQNetwork(nn.Module):
         (its best component over all actions, ``argmax_{a, c} w^T v_online``); the target network's value of that
         action is its own component that ``w`` prefers. The same numbers as :meth:`forward_prefs` of both
         networks followed by :func:`mope.agent.losses.envelope_target` with ``envelope=False``, at a fraction of the
-        cost: the target's components are scored for the chosen action only.
+        cost.
 
         Returns:
             ``(values (X, N, m), greedy (X, N))``.
         """
         x, a, c, m = v_online.shape
-        scores = torch.bmm(prefs, v_online.reshape(x, a * c, m).transpose(1, 2))  # (X, N, A*C)
-        greedy = torch.div(scores.max(dim=2).indices, c, rounding_mode="floor")  # the action of the best (a, c)
-        v_act = v_target[torch.arange(x, device=prefs.device).unsqueeze(1), greedy]  # (X, N, C, m)
-        return ConvexQNetwork.select_one(v_act.flatten(0, 1), prefs.reshape(-1, 1, m)).view(x, -1, m), greedy
+        n = prefs.shape[1]
+        p_t = prefs.transpose(1, 2)  # (X, m, N)
+        # Scores (X, A, C, N): the reductions below then run over outer axes, several times faster on the CPU than
+        # max(...).indices over a short innermost one; amax over C first, then the first best action: the same
+        # action as the first maximum over the flattened (a, c).
+        s_on = torch.bmm(v_online.reshape(x, a * c, m), p_t).view(x, a, c, n)
+        greedy = s_on.amax(dim=2).max(dim=1).indices  # (X, N)
+        s_tg = torch.bmm(v_target.reshape(x, a * c, m), p_t).view(x, a, c, n)
+        s_act = s_tg.gather(1, greedy.view(x, 1, 1, n).expand(x, 1, c, n)).squeeze(1)  # (X, C, N): action greedy
+        best = greedy * c + s_act.max(dim=1).indices  # (X, N): the flat (a, c) of the target's value
+        return v_target.reshape(x, a * c, m).gather(1, best.unsqueeze(-1).expand(x, n, m)), greedy
 
     def forward(self, obs: torch.Tensor, pref: torch.Tensor) -> torch.Tensor:
         """``(R, |A|, m)`` Q-vectors of ``R`` observations, each under its own preference ``(R, m)``."""
@@ -282,6 +293,19 @@ class ConvexQNetwork(nn.Module):
     def forward_prefs(self, obs: torch.Tensor, prefs: torch.Tensor) -> torch.Tensor:
         """``(B, K, |A|, m)`` Q-vectors of each observation under K preferences; one network pass of ``B`` rows."""
         return self.pessimistic(self.select(self.components(obs), prefs), prefs)
+
+    def greedy(self, obs: torch.Tensor, pref: torch.Tensor) -> torch.Tensor:
+        """``(R,)`` greedy actions ``argmax_a w^T Q(s, a, w)`` of ``R`` observations, each under its own ``(R, m)``.
+
+        With one head, ``w^T Q(s, a, w) = max_c w^T v_c(s, a)``, so the scores of all (a, c) at once are enough
+        (the first best action on ties); with several heads, the maxmin of :meth:`forward`.
+        """
+        if self.n_critics > 1:
+            return torch.einsum("bm,bam->ba", pref, self(obs, pref)).argmax(dim=1)
+        v = self.components(obs)[:, 0]  # (R, A, C, m)
+        r, a, c, m = v.shape
+        scores = torch.bmm(v.reshape(r, a * c, m), pref.unsqueeze(2)).view(r, a, c)
+        return scores.amax(dim=2).max(dim=1).indices
 
 
 Q_HEADS = ("conditioned", "convex")

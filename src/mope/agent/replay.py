@@ -52,11 +52,19 @@ class SumTree:
             i = int(np.argmax(bad))
             raise ValueError(f"priority {pr[i]} at index {int(idx[i])} is out of range: priorities must be finite "
                              "and >= 0")
-        nodes = self.size + idx
-        self.tree[nodes] = pr
+        tree = self.tree
+        tree[self.size + idx] = pr
+        if idx.size == 1:  # one leaf (each collection step): a scalar walk to the root, ~10x faster than arrays
+            node = (self.size + int(idx[0])) >> 1
+            while node:
+                tree[node] = tree[2 * node] + tree[2 * node + 1]
+                node >>= 1
+            return
+        nodes = np.unique(self.size + idx)  # sorted and distinct; a parent's sorted duplicates are neighbours
         for _ in range(self.depth):
-            nodes = np.unique(nodes >> 1)
-            self.tree[nodes] = self.tree[2 * nodes] + self.tree[2 * nodes + 1]
+            nodes = nodes >> 1
+            nodes = nodes[np.concatenate(([True], nodes[1:] != nodes[:-1]))]
+            tree[nodes] = tree[2 * nodes] + tree[2 * nodes + 1]
 
     def find(self, values: np.ndarray) -> np.ndarray:
         """Leaf index whose prefix-sum interval contains each value in ``values`` (all in ``[0, total)``)."""

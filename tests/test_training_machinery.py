@@ -320,6 +320,8 @@ def test_benchmark_report_covers_every_committed_piece(tmp_path: Path) -> None:
     assert dst["mope"]["reached"] == 1  # seed 0 reached CR 1 at its last evaluation, seed 1 never
     assert "## deep-sea-treasure-v0" in text and "Ratios to Envelope" in text
     assert (out / "deep-sea-treasure-v0.png").is_file()
+    code = json.loads((out / "benchmark.json").read_text())["info"]["code"]  # which mope trained (commit if any)
+    assert code.startswith("mope ") and f"; {code}: `mope benchmark --report-only`" in text
 
     _fake_bench_run(out, "resource-gathering-v0", "mope", 0, 50_000, 0.5)  # stochastic: no CR, HV or optimal share
     run_benchmark(out, report_only=True, progress=False)

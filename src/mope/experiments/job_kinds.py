@@ -53,13 +53,10 @@ def _envelope_job(payload: dict[str, Any], out: Path) -> dict[str, Any]:
     """morl-baselines' Envelope (:class:`mope.paper.envelope.EnvelopeRunner`), evaluated with mope's protocol every
     ``eval_every`` steps; writes ``peer.json``, ``metrics.csv`` and ``summary.json`` like a run folder (it cannot
     resume: an interrupted Envelope job starts over)."""
-    import csv
-    import resource
-
     from mope.config import Config
     from mope.envs import make_env
     from mope.evaluation.evaluator import Evaluator
-    from mope.experiments.runs import METRIC_COLUMNS
+    from mope.experiments.runs import METRIC_COLUMNS, CsvLog, write_summary
     from mope.paper.envelope import EnvelopeRunner
 
     out.mkdir(parents=True, exist_ok=True)
@@ -70,23 +67,20 @@ def _envelope_job(payload: dict[str, Any], out: Path) -> dict[str, Any]:
                             cfg.max_episode_steps)
     evaluator = Evaluator.from_config(make_env(cfg.env_id, cfg.max_episode_steps), cfg)
     rows, train_s = [], 0.0
-    with open(out / "metrics.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=METRIC_COLUMNS, extrasaction="ignore")
-        writer.writeheader()
+    metrics = CsvLog(out / "metrics.csv", METRIC_COLUMNS, [])
+    try:
         while runner.global_step < cfg.total_steps:
             t0 = time.perf_counter()
             runner.train(min(payload["eval_every"], cfg.total_steps - runner.global_step))
             train_s += time.perf_counter() - t0
             res, _ = evaluator.evaluate(runner.policy())
             rows.append({"step": runner.global_step, "wall_s": train_s, "train_s": train_s, **res})
-            writer.writerow({k: rows[-1].get(k, float("nan")) for k in METRIC_COLUMNS})
-            f.flush()
-    final = rows[-1]
-    summary = {"final": final, "wall_s": train_s, "s_per_1k_steps": 1000 * train_s / cfg.total_steps,
-               "train_s_per_1k_steps": 1000 * train_s / cfg.total_steps,
-               "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "method": "envelope"}
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
-    return final
+            metrics.write(rows[-1])
+    finally:
+        metrics.close()
+    write_summary(out, {"final": rows[-1], "wall_s": train_s, "s_per_1k_steps": 1000 * train_s / cfg.total_steps,
+                        "train_s_per_1k_steps": 1000 * train_s / cfg.total_steps, "method": "envelope"})
+    return rows[-1]
 
 
 JOB_KINDS: dict[str, Callable[[dict[str, Any], Path], dict[str, Any]]] = {"train": _train_job, "ppo": _ppo_job,

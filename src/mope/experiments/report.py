@@ -18,7 +18,6 @@ solutions of each group, pooled over seeds, with the true CCS where the environm
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 import os
@@ -29,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from mope.errors import MopeError, is_disk_full, short_repr
+from mope.errors import MopeError, is_disk_full
 from mope.experiments.stats import MetricStats, aggregate, bootstrap_ci, iqm  # noqa: F401 - iqm: read here before
 
 DEFAULT_METRICS = ("cr", "igd", "hv", "eum", "optimal_share", "timeout_share", "path_error", "overestimation",
@@ -92,30 +91,18 @@ class ReportResult:
 # finding and grouping runs
 # ------------------------------------------------------------------------------------------------------------
 def _read_rows(path: Path) -> list[dict[str, float]]:
-    """The rows of a numeric CSV file as floats (an empty cell is NaN).
+    """The rows of a numeric CSV file (:func:`mope.experiments.runs.read_csv_rows`; an empty cell is NaN).
 
     Raises:
         ReportError: naming the file, the line and the column of a cell that is not a number, or why the file
             cannot be read.
     """
-    try:
-        with open(path, newline="") as f:
-            reader = csv.DictReader(f)
-            return [{k: _number(v, path, reader.line_num, k) for k, v in row.items() if k is not None}
-                    for row in reader]
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
-        raise ReportError(f"'{path}' could not be read: {reason}") from None
+    from mope.experiments.runs import RunFolderError, read_csv_rows
 
-
-def _number(text: str | None, path: Path, line: int, column: str) -> float:
-    if text in ("", None):
-        return math.nan
     try:
-        return float(text)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        raise ReportError(f"'{path}' line {line}, column {column}: {short_repr(text)} is not a number; fix or delete "
-                          "that row, or move the run out of the folder") from None
+        return read_csv_rows(path)
+    except RunFolderError as exc:
+        raise ReportError(str(exc)) from None
 
 
 def find_runs(runs_dir: str | Path) -> tuple[list[Run], list[str]]:

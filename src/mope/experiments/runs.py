@@ -121,11 +121,13 @@ def write_solutions(path: str | Path, sols: Solutions) -> None:
 
 def parse_number(text: str | None, path: str | Path, line: int, column: str) -> float | int:
     """A cell of a numeric CSV log: an int where it was written as one (``100``), else a float (``0.5``, ``nan``),
-    so a row read back and written again keeps its text (``100`` stays ``100``, not ``100.0``).
+    so a row read back and written again keeps its text (``100`` stays ``100``, not ``100.0``); an empty cell is NaN.
 
     Raises:
         RunFolderError: naming the file, the line and the column of a cell that is not a number.
     """
+    if text in ("", None):
+        return math.nan
     try:
         return int(text)  # type: ignore[arg-type]
     except (TypeError, ValueError):
@@ -437,8 +439,8 @@ class _RunLogs:
         from torch.utils.tensorboard import SummaryWriter
 
         self.tb = SummaryWriter(str(out / "tb"))
-        self.metrics = _CsvLog(out / "metrics.csv", METRIC_COLUMNS, kept)
-        self.stats = _CsvLog(out / TRAIN_STATS, STATS_COLUMNS, kept_stats)
+        self.metrics = CsvLog(out / "metrics.csv", METRIC_COLUMNS, kept)
+        self.stats = CsvLog(out / TRAIN_STATS, STATS_COLUMNS, kept_stats)
 
     def on_record(self, agent: MoPE, rec: dict[str, float]) -> None:
         rec.update(loss=agent.last_losses.get("loss", float("nan")), epsilon=agent.epsilon)
@@ -458,7 +460,7 @@ class _RunLogs:
         self.tb.close()
 
 
-class _CsvLog:
+class CsvLog:
     """A CSV file rewritten with the kept rows, then appended to and flushed row by row."""
 
     def __init__(self, path: Path, columns: list[str], kept: list[dict]) -> None:
@@ -621,15 +623,20 @@ def _finish_run(agent: MoPE, config: Config, out: Path, all_records: list[dict],
     final = all_records[-1] if all_records else {}
     if agent.last_solutions is not None:
         write_solutions(out / "solutions.csv", agent.last_solutions)  # the final evaluation's solutions
-    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # KiB on Linux: this process's peak so far
-    eval_s = agent.eval_seconds
-    summary = {"final": final, "wall_s": agent.wall_s, "s_per_1k_steps": 1000 * agent.wall_s / config.total_steps,
-               "eval_s": eval_s, "train_s_per_1k_steps": 1000 * (agent.wall_s - eval_s) / config.total_steps,
-               "peak_rss_mb": peak_mb,
-               "algo": config.algo, "env_id": config.env_id, "seed": config.seed, "resumed": status == "resumable",
-               "versions": _environment_info()}
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    eval_s, per_1k = agent.eval_seconds, 1000 / config.total_steps
+    write_summary(out, {"final": final, "wall_s": agent.wall_s, "s_per_1k_steps": per_1k * agent.wall_s,
+                        "eval_s": eval_s, "train_s_per_1k_steps": per_1k * (agent.wall_s - eval_s),
+                        "algo": config.algo, "env_id": config.env_id, "seed": config.seed,
+                        "resumed": status == "resumable"})
     return RunResult(out, agent, all_records, final, agent.wall_s)
+
+
+def write_summary(out: Path, summary: dict[str, Any]) -> None:
+    """Write ``out/summary.json`` (it marks a run folder finished), adding this process's peak memory and the
+    package versions."""
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # KiB on Linux: this process's peak so far
+    summary = {**summary, "peak_rss_mb": peak_mb, "versions": _environment_info()}
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
 
 
 def resolve_checkpoint(path: str | Path) -> Path:

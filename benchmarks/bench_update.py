@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 
 CHILD = r"""
-import json, time, torch
+import json, resource, time, torch
 from mope import make_agent
 torch.set_num_threads(1)
 agent = make_agent("mope", "deep-sea-treasure-v0", seed=0, eval_every=0, checkpoint_every=0, total_steps=100_000)
@@ -40,7 +40,8 @@ t0 = time.perf_counter()
 for _ in range(300):
     agent.update()
 upd = (time.perf_counter() - t0) / 300 * 1e3
-print(json.dumps({"step_ms": step, "update_ms": upd}))
+peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+print(json.dumps({"step_ms": step, "update_ms": upd, "peak_mib": peak}))
 """
 
 
@@ -83,15 +84,18 @@ def main() -> None:
     for _ in range(args.rounds):
         res["before"].append(child(args.before / "src", args.steps))
         res["after"].append(child(here, args.steps))
-    med = {k: {m: statistics.median(r[m] for r in v) for m in ("step_ms", "update_ms")} for k, v in res.items()}
+    med = {k: {m: statistics.median(r.get(m, float("nan")) for r in v) for m in ("step_ms", "update_ms", "peak_mib")}
+           for k, v in res.items()}
     rate, floor = flop_floor_ms()
     lines = [f"Command: `.venv/bin/python benchmarks/bench_update.py --before {args.before} --rounds {args.rounds} "
              f"--steps {args.steps}`", "",
-             "| tree | ms per training step (DST defaults) | ms per bare update | step / floor | update / floor |",
-             "|---|---:|---:|---:|---:|"]
+             "| tree | ms per training step (DST defaults) | ms per bare update | step / floor | update / floor "
+             "| peak MiB (process) |",
+             "|---|---:|---:|---:|---:|---:|"]
     for k in ("before", "after"):
         lines.append(f"| {k} | {med[k]['step_ms']:.2f} | {med[k]['update_ms']:.2f} | "
-                     f"{med[k]['step_ms'] / floor:.1f}x | {med[k]['update_ms'] / floor:.1f}x |")
+                     f"{med[k]['step_ms'] / floor:.1f}x | {med[k]['update_ms'] / floor:.1f}x | "
+                     f"{med[k]['peak_mib']:.0f} |")
     lines += ["", f"after / before: {med['after']['step_ms'] / med['before']['step_ms']:.2f}x per step, "
               f"{med['after']['update_ms'] / med['before']['update_ms']:.2f}x per update (median of {args.rounds} "
               f"alternating rounds). Dense-layer floor: {floor:.2f} ms per update (5 passes of B = 128 at "

@@ -40,3 +40,13 @@ def test_mi_is_the_cell_entropy_when_states_reveal_the_preference():
     obs, lengths = paths_to_array(paths)
     # states acted in: (0,0),(0,1) for cell 0; (0,0),(1,0) for cell 1 -> I = H(C) - H(C|S) = log 2 - 0.5 log 2
     assert state_preference_mi(obs, lengths, np.array([0, 1])) == pytest.approx(0.5 * np.log(2))
+
+
+def test_mi_is_never_negative_when_states_and_cells_are_exactly_independent():
+    """Counts that factorise (state i with cell j a_i * b_j times) make I = 0; the plug-in sum rounds to -6e-17
+    there, and a mutual information is never negative."""
+    a, b = [3, 3, 4, 3], [3, 3, 3, 4]
+    pairs = [(i, j) for i, ai in enumerate(a) for j, bj in enumerate(b) for _ in range(ai * bj)]
+    obs = np.array([[[i], [99]] for i, _ in pairs])  # one acted-in state per episode
+    mi = state_preference_mi(obs, np.ones(len(pairs), dtype=int), np.array([j for _, j in pairs]))
+    assert mi == 0.0

@@ -75,4 +75,5 @@ def state_preference_mi(observations: np.ndarray, lengths: np.ndarray, cells: np
     ps = joint.sum(1, keepdims=True)
     pc = joint.sum(0, keepdims=True)
     nz = joint > 0
-    return float(np.sum(joint[nz] * np.log(joint[nz] / (ps @ pc)[nz])))
+    # I >= 0; the plug-in sum can land a rounding error below 0 (-1e-16) when S and C are independent
+    return max(0.0, float(np.sum(joint[nz] * np.log(joint[nz] / (ps @ pc)[nz]))))

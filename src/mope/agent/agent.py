@@ -133,7 +133,7 @@ def flushed_denormals() -> Iterator[None]:
 
     Adam's second moments of weights whose gradients are (nearly) zero, such as a dead ReLU unit's, decay
     geometrically into the denormal range, where x86 arithmetic is many times slower: on Deep-Sea-Treasure
-    the Q-network's Adam step took 0.98 ms with denormals and 0.31 ms without (``benchmarks/bench_update.py``).
+    the Q-network's Adam step took 0.98 ms with denormals and 0.31 ms without (``benchmarks/update_sections.py``).
     Values that small are below anything the update can resolve (float32's epsilon at 1 is 1.2e-7).
     """
     was = denormals_are_flushed()

@@ -73,7 +73,7 @@ LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0, 
                                 "return_mix": 0.0, "return_window": 2_000, "n_step": 1, "n_envs": 1,
                                 "train_freq": 1, "demos": "", "demo_episodes": 100, "demo_margin": 0.8,
                                 "demo_loss_weight": 1.0, "demo_pretrain_steps": 0,
-                                "demo_batch_share": 0.0, "demo_roll_in": 0}
+                                "demo_batch_share": 0.0, "demo_roll_in": 0, "demo_label_weight": 0.0}
 
 
 def check_preset(name: str) -> str:
@@ -318,6 +318,9 @@ class Config:
     #: Scripted demonstrations start after U{0..demo_roll_in} random actions (not recorded), to show states the
     #: demonstrator never reaches from a reset; 0: none (on the robot game 30 cost wins: docs/results/game-study).
     demo_roll_in: int = 0
+    #: Weight of J_E on the learner's own transitions, each labelled with the action of the scripted policy whose
+    #: range holds its preference, in its state (DAgger, Ross et al. 2011); 0: off.
+    demo_label_weight: float = 0.0
 
     # --- experimental: tried against the mirrored map's divergence, not adopted (off; docs/design.md) ---------
     #: H, heads of the convex head whose minimum is Q (Maxmin, Lan et al. 2020); 1: one head (always, conditioned).
@@ -506,7 +509,7 @@ def _validate_hyperparameters(self: Config) -> None:
         need(getattr(self, name) >= 0, name, "must be >= 0")
     need(self.demo_episodes >= 1, "demo_episodes", "must be >= 1")
     for name in ("lb_weight", "per_alpha", "mi_alpha", "component_loss_weight", "component_anchor_weight",
-                 "demo_margin", "demo_loss_weight"):
+                 "demo_margin", "demo_loss_weight", "demo_label_weight"):
         need(_finite(getattr(self, name)) and getattr(self, name) >= 0, name, "must be >= 0")
     need(self.max_grad_norm is None or (_finite(self.max_grad_norm) and self.max_grad_norm > 0),
          "max_grad_norm", "must be > 0 or None")

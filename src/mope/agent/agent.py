@@ -31,7 +31,7 @@ import copy
 import functools
 import math
 from collections.abc import Callable, Iterator
-from typing import Any, TypeVar
+from typing import Any, NamedTuple, TypeVar
 
 import gymnasium as gym
 import numpy as np
@@ -56,6 +56,14 @@ from mope.preferences import PreferenceSampler, sample_neighbours, sample_simple
 
 __all__ = ["EQL", "MoPE", "TrainingDivergedError", "agent_class", "linear_schedule", "make_agent", "resolve_device",
            "return_bounds"]
+
+
+class MarginRows(NamedTuple):
+    """The rows of DQfD's margin loss J_E in a batch: the demonstrator's action, which rows, and their weight."""
+
+    actions: torch.Tensor
+    mask: torch.Tensor
+    weight: torch.Tensor | float
 
 
 class TrainingDivergedError(MopeError):
@@ -301,6 +309,9 @@ class MoPE(BaseAgent):
         self.buffer = ReplayBuffer(cfg.buffer_size, self.obs_shape, self.m, cfg.per, obs_dtype)
         self.buffer.stride = cfg.n_envs
         add_demonstrations(self.buffer, cfg, self.env)
+        if cfg.demo_label_weight and not default_demonstrations(cfg.env_id):
+            raise ConfigError(f"demo_label_weight={cfg.demo_label_weight}: environment '{cfg.env_id}' has no "
+                              "scripted policy to label the learner's states; set demo_label_weight=0")
         self.global_step = 0
         #: Episodes finished, and started (the next reset's seed is ``seed + episodes_started``).
         self.episodes = 0
@@ -374,7 +385,7 @@ class MoPE(BaseAgent):
         w = self._tensor(self.relabel(batch.prefs))                                               # 3
         demo = self._tensor(batch.indices < self.buffer.reserved, torch.bool)  # demonstrations (kept slots)
         y = self._envelope_target(batch, w, acting, demo)                                         # 4: eq. 4
-        q, loss_rows, parts = self._eql_loss(obs, actions, w, y, demo)                             # 4: eq. 4 + J_E
+        q, loss_rows, parts = self._eql_loss(obs, actions, w, y, self._margin_rows(batch, actions, demo))  # + J_E
         loss = (self._tensor(batch.weights) * loss_rows).mean()
         check_finite(loss, q, y, self.global_step)
         bonus, disc_loss = self._discriminator_loss(obs, batch.prefs)                              # 5: eq. 6
@@ -384,19 +395,34 @@ class MoPE(BaseAgent):
         self.last_losses = update_statistics(loss, parts, td, q.detach(), w, bonus, disc_loss, c.reward_scale)
         return self.last_losses
 
+    def _margin_rows(self, batch: Batch, actions: torch.Tensor, demo: torch.Tensor) -> MarginRows | None:
+        """J_E's rows: on demonstrations the demonstrator's action (weight ``demo_loss_weight``), and with
+        ``demo_label_weight`` on the learner's own transitions their DAgger labels; None if J_E is off."""
+        c = self.config
+        if c.demo_label_weight > 0:
+            expert = self._tensor(self.buffer.expert_actions[batch.indices], torch.int64)
+            labelled = ~demo & (expert >= 0)
+            weight = c.demo_loss_weight * demo.float() + c.demo_label_weight * labelled.float()
+            return MarginRows(torch.where(demo, actions, expert.clamp(min=0)), demo | labelled, weight)
+        if self.buffer.reserved and c.demo_loss_weight > 0:
+            return MarginRows(actions, demo, c.demo_loss_weight)
+        return None
+
     def _eql_loss(self, obs: torch.Tensor, actions: torch.Tensor, w: torch.Tensor, y: torch.Tensor,
-                  demo: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, dict[str, torch.Tensor]]:
+                  rows: MarginRows | None) -> tuple[torch.Tensor, torch.Tensor, dict[str, torch.Tensor]]:
         """Q(s, a, w) of the taken actions and the per-transition loss: eq. 4 (with the L^B weight or homotopy of
-        the config), plus the convex head's component loss and, on demonstrations, DQfD's margin loss J_E at the
-        demonstrated preference (row 0)."""
+        the config), plus the convex head's component loss and, on ``rows`` (:meth:`_margin_rows`), DQfD's margin
+        loss J_E at the transition's own preference (row 0)."""
         c = self.config
         heads = 1
-        with_margin = bool(self.buffer.reserved) and c.demo_loss_weight > 0
+        with_margin = rows is not None
         if isinstance(self.q_net, ConvexQNetwork):  # every head learns the same targets (rows b*H + h)
             comps = self.q_net.components(obs)  # (B, H, A, C, m)
             heads = comps.shape[1]
             taken = comps[torch.arange(len(actions)), :, actions].flatten(0, 1)  # (B*H, C, m): the taken action's
-            actions, w, y, demo = (t.repeat_interleave(heads, dim=0) for t in (actions, w, y, demo))
+            actions, w, y = (t.repeat_interleave(heads, dim=0) for t in (actions, w, y))
+            if rows is not None and heads > 1:
+                rows = MarginRows(*(t.repeat_interleave(heads, dim=0) if torch.is_tensor(t) else t for t in rows))
             q = self.q_net.select_one(taken, w)  # (B*H, N, m)
             comp_loss = losses.component_loss(taken, y, c.component_anchor_weight)
             if with_margin:  # w^T Q(s, a, w) of every action at the demonstrated preference (row 0)
@@ -408,8 +434,8 @@ class MoPE(BaseAgent):
             if with_margin:
                 scalar = torch.einsum("bam,bm->ba", q_all[:, 0], w[:, 0])
         margin = None
-        if with_margin:
-            margin = losses.large_margin_loss(scalar, actions, c.demo_margin, demo)
+        if rows is not None:
+            margin = losses.large_margin_loss(scalar, rows.actions, c.demo_margin, rows.mask)
         if c.lb_homotopy_steps:  # Yang et al.'s homotopy: (1 - lambda) L^A + lambda L^B, lambda rising to lb_weight
             lam = c.lb_weight * min(1.0, self.global_step / c.lb_homotopy_steps)
             _, l_a, l_b = losses.eql_loss(q, y, w)
@@ -421,7 +447,7 @@ class MoPE(BaseAgent):
             loss_rows = loss_rows + c.component_loss_weight * comp_loss
             parts["loss_components"] = comp_loss
         if margin is not None:
-            loss_rows = loss_rows + c.demo_loss_weight * margin
+            loss_rows = loss_rows + rows.weight * margin
             parts["loss_margin"] = margin
         if heads > 1:  # per transition: the heads' losses summed, their statistics and Q averaged
             loss_rows = loss_rows.view(-1, heads).sum(1)

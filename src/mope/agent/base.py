@@ -16,6 +16,7 @@ import torch
 
 from mope.agent import losses
 from mope.agent.agent_state import AgentState, Episode
+from mope.agent.demonstrations import label_actions
 from mope.agent.replay import ReplayBuffer
 from mope.errors import MopeError
 from mope.preferences import validate_preference
@@ -122,12 +123,13 @@ class BaseAgent(AgentState):
         prefs = np.stack([ep.pref for ep in eps])
         self._explored = self._greedy = None
         actions = np.asarray(self.act(obs, prefs, greedy=False))
+        expert = self._expert_labels(obs, prefs)
         steps = [env.step(int(a)) for env, a in zip(self.envs, actions, strict=True)]
         next_obs = np.stack([np.asarray(s[0]) for s in steps])
         rewards = np.stack([np.asarray(s[1], dtype=np.float32) for s in steps])
         terminated = np.array([bool(s[2]) for s in steps])
         done = terminated | np.array([bool(s[3]) for s in steps])
-        slots = self.buffer.add_batch(obs, prefs, actions, rewards, next_obs, terminated, done)
+        slots = self.buffer.add_batch(obs, prefs, actions, rewards, next_obs, terminated, done, expert)
         if self.config.return_mix:  # the trace of each episode's greedy tail (mope.agent.losses.greedy_tail_returns)
             greedy = self._greedy_trace(obs, prefs, actions)
         self.global_step += len(eps)
@@ -142,6 +144,13 @@ class BaseAgent(AgentState):
                     self.store_episode_returns(ep, bool(terminated[i]))
                 self.episodes += 1
                 eps[i] = self._start_episode(i)
+
+    def _expert_labels(self, obs: np.ndarray, prefs: np.ndarray) -> np.ndarray | None:
+        """With ``demo_label_weight``, the scripted demonstrators' actions in the states about to be stepped
+        (:func:`mope.agent.demonstrations.label_actions`, DAgger); else None."""
+        if not self.config.demo_label_weight:
+            return None
+        return label_actions(self.config.env_id, obs, prefs, self.envs)
 
     def _greedy_trace(self, obs: np.ndarray, prefs: np.ndarray, actions: np.ndarray) -> np.ndarray:
         """Which of the actions just taken were greedy: those act() did not explore, and the explored ones that

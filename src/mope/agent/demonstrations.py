@@ -418,6 +418,30 @@ def default_demonstrations(env_id: str) -> list[tuple[str, tuple[float, float]]]
     return [(name, entry.pref_range) for name, entry in SCRIPTED_POLICIES.get(env_id, {}).items() if entry.default]
 
 
+def label_actions(env_id: str, obs: np.ndarray, prefs: np.ndarray, envs: Sequence[gym.Env]) -> np.ndarray:
+    """DAgger's labels (Ross et al. 2011): what the scripted demonstrators would do in the learner's own states.
+
+    Row ``i`` is labelled by the registered scripted policy (:func:`default_demonstrations`) whose preference
+    range holds ``prefs[i, 0]``, called as ``policy(obs[i], envs[i])`` while ``envs[i]`` is still in that state
+    (before it steps); ``-1`` where no demonstrator covers the preference (or none is registered).
+
+    Args:
+        env_id: The environment's registered id.
+        obs: ``(n, *obs_shape)`` current observations, one per env.
+        prefs: ``(n, m)`` each env's episode preference.
+        envs: The ``n`` environments, in the states ``obs`` came from.
+
+    Returns:
+        ``(n,)`` int64 actions, ``-1`` for rows without a label.
+    """
+    labels = np.full(len(obs), -1, dtype=np.int64)
+    for name, (lo, hi) in default_demonstrations(env_id):
+        policy = _lookup(env_id, name).policy
+        for i in np.flatnonzero((prefs[:, 0] >= lo) & (prefs[:, 0] <= hi) & (labels < 0)):
+            labels[i] = _as_action(policy(obs[i], envs[i]), int(envs[i].action_space.n), name)
+    return labels
+
+
 def outcome_shares(env: gym.Env, policy: Policy | str, n_games: int, seed: int = 0) -> dict[str, float]:
     """Share of games by their final ``info["outcome"]`` (else ``terminated`` / ``truncated``), reset seeds
     ``seed .. seed + n_games - 1``. The confrontation game labels a game cut by its time limit ``running``.

@@ -120,6 +120,9 @@ class ReplayBuffer:
         #: (``NO_RETURN``: none); written by :meth:`set_returns` when an episode ends.
         self.returns = np.zeros((capacity, n_objectives), dtype=np.float32)
         self.return_steps = np.full(capacity, NO_RETURN, dtype=np.int64)
+        #: The demonstrator's action in each transition's state (DAgger's label, ``-1``: none), for the margin
+        #: loss on the learner's own transitions (``Config.demo_label_weight``).
+        self.expert_actions = np.full(capacity, -1, dtype=np.int64)
         self.tree = SumTree(capacity) if prioritized else None
         self.max_priority = 1.0
         #: Slots ``[0, reserved)`` are kept for good (demonstrations, :meth:`keep_written`); the FIFO ring runs over
@@ -145,10 +148,11 @@ class ReplayBuffer:
                        np.asarray([terminated if done is None else done]))
 
     def add_batch(self, obs: np.ndarray, prefs: np.ndarray, actions: np.ndarray, rewards: np.ndarray,
-                  next_obs: np.ndarray, terminated: np.ndarray, dones: np.ndarray) -> np.ndarray:
+                  next_obs: np.ndarray, terminated: np.ndarray, dones: np.ndarray,
+                  expert: np.ndarray | None = None) -> np.ndarray:
         """Store one transition per environment (row ``k`` from env ``k``) in consecutive ring slots, each with the
         largest priority seen so far; returns the slots. The batch size must be :attr:`stride`, except in a
-        buffer whose stride is 1 (any one-by-one writer)."""
+        buffer whose stride is 1 (any one-by-one writer). ``expert``: the demonstrator's actions (``-1``: none)."""
         n = len(actions)
         ring = self.capacity - self.reserved
         idx = self.reserved + (self.pos - self.reserved + np.arange(n)) % ring
@@ -160,6 +164,7 @@ class ReplayBuffer:
         self.terminated[idx] = np.asarray(terminated, dtype=np.float32)
         self.dones[idx] = dones
         self.return_steps[idx] = NO_RETURN
+        self.expert_actions[idx] = -1 if expert is None else expert
         if self.tree is not None:
             self.tree.update(idx, np.full(n, self.max_priority))
         end = self.pos - self.reserved + n
@@ -255,7 +260,8 @@ class ReplayBuffer:
             "actions": self.actions[:n].copy(), "rewards": self.rewards[:n].copy(),
             "terminated": self.terminated[:n].copy(), "dones": self.dones[:n].copy(),
             "returns": self.returns[:n].copy(),
-            "return_steps": self.return_steps[:n].copy(), "pos": self.pos, "full": self.full,
+            "return_steps": self.return_steps[:n].copy(), "expert_actions": self.expert_actions[:n].copy(),
+            "pos": self.pos, "full": self.full,
             "max_priority": self.max_priority, "reserved": self.reserved,
         }
         if self.tree is not None:
@@ -267,7 +273,7 @@ class ReplayBuffer:
         n = len(state["actions"])
         for key in ("obs", "next_obs", "prefs", "actions", "rewards", "terminated"):
             getattr(self, key)[:n] = np.asarray(state[key])
-        for key in ("returns", "return_steps"):  # absent from checkpoints before return_mix
+        for key in ("returns", "return_steps", "expert_actions"):  # absent from older checkpoints
             if key in state:
                 getattr(self, key)[:n] = np.asarray(state[key])
         if "dones" in state:

@@ -159,3 +159,71 @@ def test_make_agent_with_an_env_id_brings_the_environment_defaults() -> None:
     agent = make_agent("mope", C.DISCRETE_ID, demo_episodes=1)
     assert agent.config.n_envs == 8 and agent.config.demos == "scripted" and agent.buffer.reserved > 0
     assert make_agent("eql", C.DISCRETE_ID, demos="", n_envs=2).config.n_envs == 2
+
+
+# ------------------------------------------------------------------------------------------------------------
+# DAgger's labels: the scripted demonstrators label the learner's own states (demo_label_weight)
+# ------------------------------------------------------------------------------------------------------------
+def test_labels_are_the_demonstrator_of_the_preference_in_each_envs_state() -> None:
+    from mope.agent.demonstrations import label_actions, pursuer_policy, pursuit_policy
+
+    envs = [make_env(C.DISCRETE_ID) for _ in range(3)]
+    obs = np.stack([env.reset(seed=40 + i)[0] for i, env in enumerate(envs)])
+    prefs = np.array([[0.9, 0.1], [0.4, 0.6], [0.1, 0.9]])  # pursuer's range, the gap, pursuit's range
+    labels = label_actions(C.DISCRETE_ID, obs, prefs, envs)
+    assert labels.tolist() == [pursuer_policy(obs[0], envs[0]), -1, pursuit_policy(obs[2], envs[2])]
+    assert (label_actions("deep-sea-treasure-v0", obs[:1], prefs[:1], envs[:1]) == -1).all()  # none registered
+
+
+def test_collection_stores_labels_only_when_asked_and_resume_keeps_them(tmp_path) -> None:
+    from mope.agent.demonstrations import label_actions
+
+    game = {**SMALL, "n_envs": 2, "demos": "", "demo_batch_share": 0.0}
+    off = MoPE(C.DISCRETE_ID, **game)
+    off.train(60)
+    assert (off.buffer.expert_actions[: len(off.buffer)] == -1).all()
+    agent = MoPE(C.DISCRETE_ID, **game, demo_label_weight=0.5)
+    agent.train(50)
+    expected = label_actions(C.DISCRETE_ID, np.stack([ep.obs for ep in agent._episodes]),
+                             np.stack([ep.pref for ep in agent._episodes]), agent.envs)
+    agent.train(2)  # one collection step of both envs, into the two slots before pos
+    slots = agent.buffer.reserved + (agent.buffer.pos - agent.buffer.reserved - np.array([2, 1])) \
+        % (agent.buffer.capacity - agent.buffer.reserved)
+    np.testing.assert_array_equal(agent.buffer.expert_actions[slots], expected)
+    labels = agent.buffer.expert_actions[: len(agent.buffer)]
+    prefs = agent.buffer.prefs[: len(agent.buffer), 0]
+    covered = (prefs <= 0.35) | (prefs >= 0.45)
+    assert (labels[covered] >= 0).all() and (labels[~covered] == -1).all() and covered.any()
+    agent.train(40)  # past learning_starts: updates with the labelled rows' margin loss
+    assert agent.last_losses["loss_margin"] > 0
+    agent.save(tmp_path / "ck.pt", include_buffer=True)
+    back = MoPE.load(tmp_path / "ck.pt")
+    n = len(agent.buffer)
+    np.testing.assert_array_equal(back.buffer.expert_actions[:n], agent.buffer.expert_actions[:n])
+
+
+def test_the_label_weight_scales_the_margin_loss_on_labelled_rows_only() -> None:
+    from mope.agent.agent import margin_rows
+
+    agent = MoPE(C.DISCRETE_ID, **{**SMALL, "buffer_size": 20_000}, demos="scripted", demo_episodes=1,
+                 demo_label_weight=0.25, demo_loss_weight=2.0, n_envs=1)
+    agent.buffer.add_batch(*(np.zeros((1, *s)) for s in ((17,), (2,))), np.array([3]), np.zeros((1, 2)),
+                           np.zeros((1, 17)), np.array([False]), np.array([False]), np.array([5]))
+    agent.buffer.add_batch(*(np.zeros((1, *s)) for s in ((17,), (2,))), np.array([3]), np.zeros((1, 2)),
+                           np.zeros((1, 17)), np.array([False]), np.array([False]))
+    r = agent.buffer.reserved
+    batch = agent.buffer.sample(4, np.random.default_rng(0))
+    batch.indices[:] = [0, r, r + 1, 1]  # demonstration, labelled, unlabelled, demonstration
+    actions = torch.tensor([int(agent.buffer.actions[0]), 3, 3, int(agent.buffer.actions[1])])
+    demo = torch.tensor([True, False, False, True])
+    rows = margin_rows(agent.config, agent.buffer, batch.indices, actions, demo)
+    assert rows.actions.tolist() == [actions[0].item(), 5, 0, actions[3].item()]
+    assert rows.mask.tolist() == [True, True, False, True]
+    assert rows.weight.tolist() == [2.0, 0.25, 0.0, 2.0]
+
+
+def test_labels_need_an_environment_with_scripted_policies() -> None:
+    with pytest.raises(ConfigError, match="demo_label_weight=1.0: environment 'deep-sea-treasure-v0' has no"):
+        MoPE("deep-sea-treasure-v0", **SMALL, demo_label_weight=1.0)
+    with pytest.raises(ConfigError, match="demo_label_weight"):
+        MoPE(C.DISCRETE_ID, **SMALL, demos="", demo_label_weight=-0.5)

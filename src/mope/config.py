@@ -219,9 +219,8 @@ class Config:
     #: Episode time limit; ``None`` uses the limit the environment registers (100 on Deep-Sea-Treasure).
     max_episode_steps: int | None = None
 
-    #: How observations enter the networks: "scale" (a bounded Box to [0, 1]: the paper's (x, y) input), "onehot"
-    #: (each coordinate of an integer Box one-hot), "joint" (the whole cell of a small integer Box one-hot: no
-    #: features shared between states), or "auto" (onehot for a small integer Box, else scale).
+    #: How observations enter the networks: "scale" (a bounded Box to [0, 1]), "onehot" (each coordinate of an
+    #: integer Box one-hot), "joint" (a small integer Box's whole cell one-hot), "auto" (onehot if small, else scale).
     obs_encoding: str = "auto"
 
     # --- EQL core (paper eq. 4; Yang et al. 2019) ------------------------------------------------------------
@@ -315,11 +314,9 @@ class Config:
     demo_pretrain_steps: int = 0
     #: Share of every batch drawn uniformly from the demonstrations (0: they compete in prioritized replay).
     demo_batch_share: float = 0.0
-    #: Scripted demonstrations start after U{0..demo_roll_in} random actions (not recorded), to show states the
-    #: demonstrator never reaches from a reset; 0: none (on the robot game 30 cost wins: docs/results/game-study).
+    #: Scripted demonstrations start after U{0..demo_roll_in} unrecorded random actions; 0: none (game-study).
     demo_roll_in: int = 0
-    #: Weight of J_E on the learner's own transitions, each labelled with the action of the scripted policy whose
-    #: range holds its preference, in its state (DAgger, Ross et al. 2011); 0: off.
+    #: Weight of J_E on the learner's own states, labelled by the scripted policies (DAgger); 0: off (game-study).
     demo_label_weight: float = 0.0
 
     # --- experimental: tried against the mirrored map's divergence, not adopted (off; docs/design.md) ---------

@@ -65,6 +65,25 @@ class MarginRows(NamedTuple):
     mask: torch.Tensor
     weight: torch.Tensor | float
 
+    def repeat(self, heads: int) -> MarginRows:
+        """Each row ``heads`` times in a row (the convex head's rows ``b * H + h``)."""
+        return MarginRows(*(t.repeat_interleave(heads, dim=0) if torch.is_tensor(t) else t for t in self))
+
+
+def margin_rows(cfg: Config, buffer: ReplayBuffer, indices: np.ndarray, actions: torch.Tensor,
+                demo: torch.Tensor) -> MarginRows | None:
+    """J_E's rows in a batch (``indices``, taken ``actions``, ``demo`` the rows in kept slots): on demonstrations
+    the demonstrator's action with weight ``demo_loss_weight``; with ``demo_label_weight``, on the learner's own
+    transitions their DAgger labels (:func:`mope.agent.demonstrations.label_actions`); None if J_E is off."""
+    if cfg.demo_label_weight > 0:
+        expert = torch.as_tensor(buffer.expert_actions[indices], device=actions.device)
+        labelled = ~demo & (expert >= 0)
+        weight = cfg.demo_loss_weight * demo.float() + cfg.demo_label_weight * labelled.float()
+        return MarginRows(torch.where(demo, actions, expert.clamp(min=0)), demo | labelled, weight)
+    if buffer.reserved and cfg.demo_loss_weight > 0:
+        return MarginRows(actions, demo, cfg.demo_loss_weight)
+    return None
+
 
 class TrainingDivergedError(MopeError):
     """A loss, Q-value or priority became NaN or infinite."""
@@ -187,7 +206,11 @@ def demonstrations_for(cfg: Config, env: gym.Env) -> Demonstrations | None:
 
 def add_demonstrations(buffer: ReplayBuffer, cfg: Config, env: gym.Env) -> None:
     """Write the config's demonstrations (:func:`demonstrations_for`) into the first slots of ``buffer`` and keep
-    them there for good (DQfD); their updates add the margin loss J_E."""
+    them there for good (DQfD); their updates add the margin loss J_E. Checks that DAgger's labels
+    (``demo_label_weight``) have scripted policies to come from."""
+    if cfg.demo_label_weight and not default_demonstrations(cfg.env_id):
+        raise ConfigError(f"demo_label_weight={cfg.demo_label_weight}: environment '{cfg.env_id}' has no "
+                          "scripted policy to label the learner's states; set demo_label_weight=0")
     demos = demonstrations_for(cfg, env)
     if demos is None:
         return
@@ -245,8 +268,7 @@ class MoPE(BaseAgent):
 
     Args:
         env: A Gymnasium/MO-Gymnasium environment, or its id.
-        config: A :class:`~mope.config.Config`; default the class's variant (``mope`` here, ``eql`` for
-            :class:`EQL`) with default settings.
+        config: A :class:`~mope.config.Config`; default: the class's variant (``mope``; ``eql`` for EQL).
         **overrides: Any ``Config`` field, e.g. ``n_omega=64, sigma_omega=0.04, mi_alpha=0.1``.
 
     Example:
@@ -309,9 +331,6 @@ class MoPE(BaseAgent):
         self.buffer = ReplayBuffer(cfg.buffer_size, self.obs_shape, self.m, cfg.per, obs_dtype)
         self.buffer.stride = cfg.n_envs
         add_demonstrations(self.buffer, cfg, self.env)
-        if cfg.demo_label_weight and not default_demonstrations(cfg.env_id):
-            raise ConfigError(f"demo_label_weight={cfg.demo_label_weight}: environment '{cfg.env_id}' has no "
-                              "scripted policy to label the learner's states; set demo_label_weight=0")
         self.global_step = 0
         #: Episodes finished, and started (the next reset's seed is ``seed + episodes_started``).
         self.episodes = 0
@@ -385,7 +404,8 @@ class MoPE(BaseAgent):
         w = self._tensor(self.relabel(batch.prefs))                                               # 3
         demo = self._tensor(batch.indices < self.buffer.reserved, torch.bool)  # demonstrations (kept slots)
         y = self._envelope_target(batch, w, acting, demo)                                         # 4: eq. 4
-        q, loss_rows, parts = self._eql_loss(obs, actions, w, y, self._margin_rows(batch, actions, demo))  # + J_E
+        rows = margin_rows(c, self.buffer, batch.indices, actions, demo)  # J_E's rows (DQfD; DAgger labels)
+        q, loss_rows, parts = self._eql_loss(obs, actions, w, y, rows)                             # 4: eq. 4 + J_E
         loss = (self._tensor(batch.weights) * loss_rows).mean()
         check_finite(loss, q, y, self.global_step)
         bonus, disc_loss = self._discriminator_loss(obs, batch.prefs)                              # 5: eq. 6
@@ -395,19 +415,6 @@ class MoPE(BaseAgent):
         self.last_losses = update_statistics(loss, parts, td, q.detach(), w, bonus, disc_loss, c.reward_scale)
         return self.last_losses
 
-    def _margin_rows(self, batch: Batch, actions: torch.Tensor, demo: torch.Tensor) -> MarginRows | None:
-        """J_E's rows: on demonstrations the demonstrator's action (weight ``demo_loss_weight``), and with
-        ``demo_label_weight`` on the learner's own transitions their DAgger labels; None if J_E is off."""
-        c = self.config
-        if c.demo_label_weight > 0:
-            expert = self._tensor(self.buffer.expert_actions[batch.indices], torch.int64)
-            labelled = ~demo & (expert >= 0)
-            weight = c.demo_loss_weight * demo.float() + c.demo_label_weight * labelled.float()
-            return MarginRows(torch.where(demo, actions, expert.clamp(min=0)), demo | labelled, weight)
-        if self.buffer.reserved and c.demo_loss_weight > 0:
-            return MarginRows(actions, demo, c.demo_loss_weight)
-        return None
-
     def _eql_loss(self, obs: torch.Tensor, actions: torch.Tensor, w: torch.Tensor, y: torch.Tensor,
                   rows: MarginRows | None) -> tuple[torch.Tensor, torch.Tensor, dict[str, torch.Tensor]]:
         """Q(s, a, w) of the taken actions and the per-transition loss: eq. 4 (with the L^B weight or homotopy of
@@ -415,23 +422,21 @@ class MoPE(BaseAgent):
         loss J_E at the transition's own preference (row 0)."""
         c = self.config
         heads = 1
-        with_margin = rows is not None
         if isinstance(self.q_net, ConvexQNetwork):  # every head learns the same targets (rows b*H + h)
             comps = self.q_net.components(obs)  # (B, H, A, C, m)
             heads = comps.shape[1]
             taken = comps[torch.arange(len(actions)), :, actions].flatten(0, 1)  # (B*H, C, m): the taken action's
             actions, w, y = (t.repeat_interleave(heads, dim=0) for t in (actions, w, y))
-            if rows is not None and heads > 1:
-                rows = MarginRows(*(t.repeat_interleave(heads, dim=0) if torch.is_tensor(t) else t for t in rows))
+            rows = rows.repeat(heads) if rows is not None else None
             q = self.q_net.select_one(taken, w)  # (B*H, N, m)
             comp_loss = losses.component_loss(taken, y, c.component_anchor_weight)
-            if with_margin:  # w^T Q(s, a, w) of every action at the demonstrated preference (row 0)
+            if rows is not None:  # w^T Q(s, a, w) of every action at the demonstrated preference (row 0)
                 scalar = torch.einsum("bm,bacm->bac", w[:, 0], comps.flatten(0, 1)).amax(dim=2)
         else:
             q_all = self.q_net.forward_prefs(obs, w)
             q = losses.taken_action_q(q_all, actions)
             comp_loss = None
-            if with_margin:
+            if rows is not None:
                 scalar = torch.einsum("bam,bm->ba", q_all[:, 0], w[:, 0])
         margin = None
         if rows is not None:

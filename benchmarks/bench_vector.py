@@ -24,7 +24,7 @@ import torch
 from mope import MoPE
 from mope.envs import confrontation as C
 
-#: The first setting of each env is its one-env baseline (the game's per-environment defaults already set 8 envs and
+#: The first setting of each env is its one-env baseline (the game's per-environment defaults already set 4 envs and
 #: demonstrations, so its baseline names one env and no demonstrations).
 ONE_ENV_GAME = {"n_envs": 1, "demos": "", "demo_batch_share": 0.0}
 SETTINGS: dict[str, list[dict[str, object]]] = {

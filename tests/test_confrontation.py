@@ -313,7 +313,7 @@ def test_a_short_training_beats_random_red() -> None:
                    ref_point=C.reference_point(0.99, 150))
     losses, catches = [], []
     for seed in range(3):
-        # the learner alone, one env (the game's defaults add 8 envs and demonstrations: tests/test_learning_from_
+        # the learner alone, one env (the game's defaults add 4 envs and demonstrations: tests/test_learning_from_
         # demonstrations.py has their short-training test)
         agent = MoPE(C.DISCRETE_ID, seed=seed, total_steps=5000, n_envs=1, buffer_size=20_000, demos="",
                      demo_batch_share=0.0)

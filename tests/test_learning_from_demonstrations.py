@@ -157,7 +157,7 @@ def test_make_agent_with_an_env_id_brings_the_environment_defaults() -> None:
     from mope import make_agent
 
     agent = make_agent("mope", C.DISCRETE_ID, demo_episodes=1)
-    assert agent.config.n_envs == 8 and agent.config.demos == "scripted" and agent.buffer.reserved > 0
+    assert agent.config.n_envs == 4 and agent.config.demos == "scripted" and agent.buffer.reserved > 0
     assert make_agent("eql", C.DISCRETE_ID, demos="", n_envs=2).config.n_envs == 2
 
 

@@ -149,7 +149,7 @@ def test_confrontation_seeds_take_a_count_a_range_or_a_list() -> None:
     assert names == ["eql-s5", "mope-nodemo-s5", "mope-s5", "ppo-s5-pref00", "ppo-s5-pref01"]
     configs = {j.name: j.payload for j in confrontation_jobs([5], 1000, 2, 1000, 3, "cpu", {})}
     # every agent starts from the game's defaults; only "mope" keeps their demonstrations
-    assert {configs[n]["n_envs"] for n in ("eql-s5", "mope-nodemo-s5", "mope-s5")} == {8}
+    assert {configs[n]["n_envs"] for n in ("eql-s5", "mope-nodemo-s5", "mope-s5")} == {4}
     assert (configs["mope-s5"]["demos"], configs["mope-nodemo-s5"]["demos"], configs["eql-s5"]["demos"]) == \
         ("scripted", "", "")
     assert not configs["eql-s5"]["experience_exploration"] and configs["mope-nodemo-s5"]["experience_exploration"]

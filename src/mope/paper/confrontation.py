@@ -1,7 +1,7 @@
 """``mope reproduce confrontation``: the paper's Robot Confrontation experiment (Fig. 5, Fig. 6) and a table.
 
 Trains, per seed, three preference-conditioned agents on ``mope/RobotConfrontationDiscrete-v0`` -- ``mope``
-(the game's defaults, :data:`mope.config.ENV_DEFAULTS`: MoPE with scripted demonstrations and 8 envs),
+(the game's defaults, :data:`mope.config.ENV_DEFAULTS`: MoPE with scripted demonstrations and 4 envs),
 ``mope-nodemo`` (the paper's method alone: the same without demonstrations) and ``eql`` (EQL, also without
 demonstrations, vectorised the same way) -- and the outer-loop PPO baseline on ``mope/RobotConfrontation-v0``
 (one policy per preference, K of them, on the scalarised reward ``w^T r`` through MO-Gymnasium's

@@ -418,7 +418,7 @@ class MoPE(BaseAgent):
     def _eql_loss(self, obs: torch.Tensor, actions: torch.Tensor, w: torch.Tensor, y: torch.Tensor,
                   rows: MarginRows | None) -> tuple[torch.Tensor, torch.Tensor, dict[str, torch.Tensor]]:
         """Q(s, a, w) of the taken actions and the per-transition loss: eq. 4 (with the L^B weight or homotopy of
-        the config), plus the convex head's component loss and, on ``rows`` (:meth:`_margin_rows`), DQfD's margin
+        the config), plus the convex head's component loss and, on ``rows`` (:func:`margin_rows`), DQfD's margin
         loss J_E at the transition's own preference (row 0)."""
         c = self.config
         heads = 1

@@ -74,7 +74,8 @@ LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0, 
                                 "return_mix": 0.0, "return_window": 2_000, "n_step": 1, "n_envs": 1,
                                 "train_freq": 1, "demos": "", "demo_episodes": 100, "demo_margin": 0.8,
                                 "demo_loss_weight": 1.0, "demo_pretrain_steps": 0,
-                                "demo_batch_share": 0.0, "demo_roll_in": 0, "demo_label_weight": 0.0}
+                                "demo_batch_share": 0.0, "demo_roll_in": 0, "demo_label_weight": 0.0,
+                                "seen_bound_margin": None}
 
 
 def check_preset(name: str) -> str:
@@ -231,8 +232,7 @@ class Config:
     q_head: str = "convex"
     #: C, return vectors per action of the convex head.
     n_components: int = 12
-    #: Weight of the convex head's component loss (each target also trains its nearest component).
-    component_loss_weight: float = 1.0
+    component_loss_weight: float = 1.0  # of the convex head's component loss (targets train their nearest component)
     hidden_sizes: tuple[int, ...] = (256, 256, 256)
     learning_rate: float = 3e-4
     #: Cosine decay of the learning rate to this value over total_steps; None keeps it constant.
@@ -265,8 +265,10 @@ class Config:
     #: Pick (a*, w'*) of the envelope target with the online network, read the value from the target network
     #: (double Q-learning). Not in the paper; see docs/design.md for why it is on by default.
     double_q: bool = True
-    #: Clamp the targets y to the returns the reward bounds allow (not in the paper; see docs/design.md).
+    #: Clamp the targets y to the returns the reward bounds allow (not in the paper; see docs/design.md), and with
+    #: kappa >= 0 the upper clamp to at most the largest return seen plus kappa x the range seen (None: not).
     clip_targets: bool = True
+    seen_bound_margin: float | None = None
     epsilon_start: float = 1.0
     epsilon_end: float = 0.05
     epsilon_decay_steps: int = 10_000
@@ -290,8 +292,7 @@ class Config:
     #: the acting preferences of the whole batch ("batch"), or both; "own" switches the envelope off (each row maxes
     #: over actions at its own preference only: an ablation, like morl-baselines' ``envelope=False``).
     envelope_prefs: str = "own"
-    #: Weight alpha of the mutual-information term in the priority (eq. 7).
-    mi_alpha: float = 0.1
+    mi_alpha: float = 0.1  # weight alpha of the mutual-information term in the priority (eq. 7)
     disc_hidden: tuple[int, ...] = (64, 64)
     disc_learning_rate: float = 1e-3
 
@@ -509,6 +510,8 @@ def _validate_hyperparameters(self: Config) -> None:
     for name in ("lb_weight", "per_alpha", "mi_alpha", "component_loss_weight", "component_anchor_weight",
                  "demo_margin", "demo_loss_weight", "demo_label_weight"):
         need(_finite(getattr(self, name)) and getattr(self, name) >= 0, name, "must be >= 0")
+    need(self.seen_bound_margin is None or (_finite(self.seen_bound_margin) and self.seen_bound_margin >= 0),
+         "seen_bound_margin", "must be >= 0 or None")
     need(self.max_grad_norm is None or (_finite(self.max_grad_norm) and self.max_grad_norm > 0),
          "max_grad_norm", "must be > 0 or None")
     for name in ("epsilon_start", "epsilon_end", "per_beta_start", "relabel_broad", "return_mix", "demo_batch_share"):

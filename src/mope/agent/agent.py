@@ -204,22 +204,24 @@ def demonstrations_for(cfg: Config, env: gym.Env) -> Demonstrations | None:
         for k, (name, pref_range) in enumerate(sources)])
 
 
-def add_demonstrations(buffer: ReplayBuffer, cfg: Config, env: gym.Env) -> None:
+def add_demonstrations(buffer: ReplayBuffer, cfg: Config, env: gym.Env) -> Demonstrations | None:
     """Write the config's demonstrations (:func:`demonstrations_for`) into the first slots of ``buffer`` and keep
     them there for good (DQfD); their updates add the margin loss J_E. Checks that DAgger's labels
-    (``demo_label_weight``) have scripted policies to come from."""
+    (``demo_label_weight``) have scripted policies to come from. Returns the demonstrations (None if the
+    config has none)."""
     if cfg.demo_label_weight and not default_demonstrations(cfg.env_id):
         raise ConfigError(f"demo_label_weight={cfg.demo_label_weight}: environment '{cfg.env_id}' has no "
                           "scripted policy to label the learner's states; set demo_label_weight=0")
     demos = demonstrations_for(cfg, env)
     if demos is None:
-        return
+        return None
     if len(demos) > cfg.buffer_size // 2:
         raise ConfigError(f"the demonstrations hold {len(demos)} transitions, more than half of "
                           f"buffer_size={cfg.buffer_size}; raise buffer_size or use fewer demo_episodes")
     buffer.add_batch(demos.obs, demos.prefs, demos.actions, demos.rewards, demos.next_obs, demos.terminated,
                      demos.dones)
     buffer.keep_written()
+    return demos
 
 
 def relabel_preferences(c: Config, acting_prefs: np.ndarray, m: int, rng: np.random.Generator) -> np.ndarray:
@@ -324,13 +326,13 @@ class MoPE(BaseAgent):
                                                    fused=True)
 
         self.q_low, self.q_high = return_bounds(self.env, cfg.gamma)
-        # The targets' clamp, in the learner's units (rewards times reward_scale).
-        self._q_low_t = torch.as_tensor(self.q_low * cfg.reward_scale, dtype=torch.float32, device=self.device)
-        self._q_high_t = torch.as_tensor(self.q_high * cfg.reward_scale, dtype=torch.float32, device=self.device)
+        self.set_target_clamp()
         obs_dtype = np.float32 if not isinstance(spec.obs_space, gym.spaces.Discrete) else np.int64
         self.buffer = ReplayBuffer(cfg.buffer_size, self.obs_shape, self.m, cfg.per, obs_dtype)
         self.buffer.stride = cfg.n_envs
-        add_demonstrations(self.buffer, cfg, self.env)
+        demos = add_demonstrations(self.buffer, cfg, self.env)
+        for start, end in (demos.episode_bounds() if demos is not None and cfg.seen_bound_margin is not None else ()):
+            self.observe_returns(demos.rewards[start:end])
         self.global_step = 0
         #: Episodes finished, and started (the next reset's seed is ``seed + episodes_started``).
         self.episodes = 0

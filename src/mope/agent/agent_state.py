@@ -118,6 +118,7 @@ class Episode:
         actions: The actions taken so far.
         slots: With ``return_mix``, the buffer slots of its transitions ...
         greedy: ... and which of its actions were greedy.
+        rewards: With ``seen_bound_margin``, its rewards so far.
     """
 
     seed: int
@@ -126,6 +127,7 @@ class Episode:
     actions: list[int] = field(default_factory=list)
     slots: list[int] = field(default_factory=list)
     greedy: list[bool] = field(default_factory=list)
+    rewards: list[np.ndarray] = field(default_factory=list)
 
 
 class AgentState:
@@ -160,6 +162,8 @@ class AgentState:
         if a.discriminator is not None and a.disc_optimizer is not None:
             state["discriminator"] = a.discriminator.state_dict()
             state["disc_optimizer"] = a.disc_optimizer.state_dict()
+        if a.seen_returns is not None:
+            state["seen_returns"] = torch.as_tensor(a.seen_returns)
         if include_buffer:
             state["buffer"] = {k: torch.as_tensor(v) if isinstance(v, np.ndarray) else v
                                for k, v in a.buffer.state_dict().items()}
@@ -228,6 +232,9 @@ class AgentState:
         torch.set_rng_state(data["torch_rng"])
         a.wall_s = float(data.get("wall_s", 0.0))
         a.eval_seconds = float(data.get("eval_seconds", 0.0))
+        if "seen_returns" in data:
+            a.seen_returns = data["seen_returns"].numpy()
+            a.set_target_clamp()
         if "buffer" in data:
             a.buffer.load_state_dict({k: v.numpy() if isinstance(v, torch.Tensor) else v
                                       for k, v in data["buffer"].items()})
@@ -252,10 +259,13 @@ class AgentState:
         draws)."""
         a: Any = self
         obs, _ = a.envs[i].reset(seed=seed)
+        rewards = []
         for act in actions:
-            obs, *_ = a.envs[i].step(int(act))
+            obs, r, *_ = a.envs[i].step(int(act))
+            rewards.append(np.asarray(r, dtype=np.float32))
         return Episode(seed, np.asarray(pref, dtype=np.float64), obs, [int(x) for x in actions],
-                       [int(x) for x in slots], [bool(x) for x in greedy])
+                       [int(x) for x in slots], [bool(x) for x in greedy],
+                       rewards if a.config.seen_bound_margin is not None else [])
 
     def __repr__(self) -> str:
         a: Any = self

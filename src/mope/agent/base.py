@@ -22,6 +22,27 @@ from mope.errors import MopeError
 from mope.preferences import validate_preference
 
 
+def suffix_returns(rewards: np.ndarray, gamma: float) -> np.ndarray:
+    """``(T, m)`` rewards of one episode -> ``(T, m)`` discounted returns from each step to its end (a backward
+    recursion ``G_t = r_t + gamma G_{t+1}``, as a linear filter)."""
+    from scipy.signal import lfilter
+
+    r = np.asarray(rewards, dtype=np.float64)
+    return lfilter([1.0], [1.0, -gamma], r[::-1], axis=0)[::-1]
+
+
+def seen_upper_bound(space_high: np.ndarray, seen_low: np.ndarray, seen_high: np.ndarray, margin: float
+                     ) -> np.ndarray:
+    """The targets' upper clamp per objective: the reward space's bound, or the largest return seen plus
+    ``margin`` times the range seen, whichever is lower (not in the paper).
+
+    A target above every return any episode reached from any state is the max operator's upward drift feeding on
+    itself (minecart's Q-values climb to 150 where a trip brings 1.5); the margin leaves room for continuations
+    that join the best pieces of several episodes.
+    """
+    return np.minimum(space_high, seen_high + margin * (seen_high - seen_low))
+
+
 def linear_schedule(start: float, end: float, duration: int, step: int) -> float:
     """Linear interpolation from ``start`` to ``end`` over ``duration`` steps, then constant."""
     frac = min(1.0, step / max(1, duration))
@@ -44,6 +65,11 @@ class BaseAgent(AgentState):
     device: torch.device
     rng: np.random.Generator
     global_step: int
+    q_low: np.ndarray
+    q_high: np.ndarray
+    #: ``(2, m)``: the lowest and highest discounted return seen from any state of an ended episode (with
+    #: ``seen_bound_margin``; None before the first).
+    seen_returns: np.ndarray | None = None
     #: Which rows of the latest epsilon-greedy :meth:`act` took a random action.
     _explored: np.ndarray | None = None
     #: The greedy action of each row of the latest :meth:`act` (-1 where it was not computed).
@@ -136,14 +162,38 @@ class BaseAgent(AgentState):
         for i, ep in enumerate(eps):
             ep.obs = next_obs[i] if len(eps) > 1 else steps[i][0]
             ep.actions.append(int(actions[i]))
+            if self.config.seen_bound_margin is not None:
+                ep.rewards.append(rewards[i])
             if self.config.return_mix:
                 ep.slots.append(int(slots[i]))
                 ep.greedy.append(bool(greedy[i]))
             if done[i]:
+                if ep.rewards:
+                    self.observe_returns(np.stack(ep.rewards))
                 if self.config.return_mix:
                     self.store_episode_returns(ep, bool(terminated[i]))
                 self.episodes += 1
                 eps[i] = self._start_episode(i)
+
+    def observe_returns(self, rewards: np.ndarray) -> None:
+        """Fold one episode's ``(T, m)`` rewards into the range of returns seen (:func:`suffix_returns`) and
+        tighten the targets' upper clamp to it (:func:`seen_upper_bound`; with ``seen_bound_margin``)."""
+        g = suffix_returns(rewards, self.config.gamma)
+        low, high = g.min(axis=0), g.max(axis=0)
+        if self.seen_returns is not None:
+            low, high = np.minimum(low, self.seen_returns[0]), np.maximum(high, self.seen_returns[1])
+        self.seen_returns = np.stack([low, high])
+        self.set_target_clamp()
+
+    def set_target_clamp(self) -> None:
+        """The targets' clamp in the learner's units: the reward space's bounds, the upper one tightened to the
+        returns seen (:func:`seen_upper_bound`) once an episode has ended, with ``seen_bound_margin``."""
+        c = self.config
+        high = self.q_high
+        if c.seen_bound_margin is not None and self.seen_returns is not None:
+            high = seen_upper_bound(self.q_high, *self.seen_returns, c.seen_bound_margin)
+        self._q_low_t = torch.as_tensor(self.q_low * c.reward_scale, dtype=torch.float32, device=self.device)
+        self._q_high_t = torch.as_tensor(high * c.reward_scale, dtype=torch.float32, device=self.device)
 
     def _expert_labels(self, obs: np.ndarray, prefs: np.ndarray) -> np.ndarray | None:
         """With ``demo_label_weight``, the scripted demonstrators' actions in the states about to be stepped

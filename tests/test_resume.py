@@ -38,8 +38,9 @@ def _metrics(run: Path) -> list[dict[str, str]]:
 
 
 @pytest.mark.parametrize("extra", [{}, {"return_mix": 0.0}, {"n_envs": 3, "train_freq": 2},
-                                   {"n_envs": 4, "n_step": 3, "gradient_steps": 2}],
-                         ids=["defaults", "no-return-mix", "three-envs", "four-envs-n-step"])
+                                   {"n_envs": 4, "n_step": 3, "gradient_steps": 2},
+                                   {"n_envs": 2, "seen_bound_margin": 0.0}],
+                         ids=["defaults", "no-return-mix", "three-envs", "four-envs-n-step", "seen-bound"])
 def test_agent_save_load_mid_episode_continues_identically(tmp_path, extra):
     cfg = Config.for_algo("mope", total_steps=400, learning_starts=50, n_omega=8, hidden_sizes=[32, 32], seed=5,
                           **extra)
@@ -61,6 +62,9 @@ def test_agent_save_load_mid_episode_continues_identically(tmp_path, extra):
     for p_ref, p_b in zip(ref.q_net.parameters(), b.q_net.parameters(), strict=True):
         assert np.array_equal(p_ref.detach().numpy(), p_b.detach().numpy())
     np.testing.assert_array_equal(ref.pref_sampler.counts, b.pref_sampler.counts)
+    if "seen_bound_margin" in extra:  # the returns seen, from episodes that ended on either side of the checkpoint
+        np.testing.assert_array_equal(ref.seen_returns, b.seen_returns)
+        np.testing.assert_array_equal(ref._q_high_t.numpy(), b._q_high_t.numpy())
     if extra.get("return_mix") != 0.0:  # the greedy-tail returns of the episodes that spanned the checkpoint too
         np.testing.assert_array_equal(ref.buffer.return_steps, b.buffer.return_steps)
         np.testing.assert_array_equal(ref.buffer.returns, b.buffer.returns)

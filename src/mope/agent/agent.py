@@ -330,9 +330,7 @@ class MoPE(BaseAgent):
         obs_dtype = np.float32 if not isinstance(spec.obs_space, gym.spaces.Discrete) else np.int64
         self.buffer = ReplayBuffer(cfg.buffer_size, self.obs_shape, self.m, cfg.per, obs_dtype)
         self.buffer.stride = cfg.n_envs
-        demos = add_demonstrations(self.buffer, cfg, self.env)
-        for start, end in (demos.episode_bounds() if demos is not None and cfg.seen_bound_margin is not None else ()):
-            self.observe_returns(demos.rewards[start:end])
+        self.observe_demonstrations(add_demonstrations(self.buffer, cfg, self.env))
         self.global_step = 0
         #: Episodes finished, and started (the next reset's seed is ``seed + episodes_started``).
         self.episodes = 0
@@ -471,18 +469,20 @@ class MoPE(BaseAgent):
                          demo: torch.Tensor | None = None) -> torch.Tensor:
         """Target y of eq. 4 (:mod:`mope.agent.targets`: one step, or ``n_step`` with each row's Watkins cut, none on
         demonstrations), clamped to the return bounds and, with ``return_mix``, blended with the behaviour's
-        greedy-tail returns."""
+        greedy-tail returns (and clamped again, with ``seen_bound_margin``)."""
         c = self.config
         if c.n_step > 1:
             y = targets.n_step_target(self.q_net, self.target_net, self.buffer, batch.indices, w, acting, c, c.n_step,
                                       uncut=demo)
         else:
             y = targets.one_step_target(self.q_net, self.target_net, self.buffer, batch.indices, w, acting, c)
-        y = losses.clip_targets(y, self._q_low_t, self._q_high_t) if c.clip_targets else y
+        y = losses.clip_targets(y, self._q_low_t, self._q_high_t) if c.clip_targets or self.bounds_seen else y
         if c.return_mix:
             fresh = self.global_step - self.buffer.return_steps[batch.indices] < c.return_window
             y = losses.mix_behaviour_returns(y, self._tensor(self.buffer.returns[batch.indices]),
                                              self._tensor(fresh, torch.bool), c.return_mix)
+            if self.bounds_seen:  # the greedy-tail returns end on the target network's values: clamp the blend too
+                y = losses.clip_targets(y, self._q_low_t, self._q_high_t)
         return y
 
     def _gradient_step(self, loss: torch.Tensor, disc_loss: torch.Tensor | None = None) -> None:

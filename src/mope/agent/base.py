@@ -162,7 +162,7 @@ class BaseAgent(AgentState):
         for i, ep in enumerate(eps):
             ep.obs = next_obs[i] if len(eps) > 1 else steps[i][0]
             ep.actions.append(int(actions[i]))
-            if self.config.seen_bound_margin is not None:
+            if self.bounds_seen:
                 ep.rewards.append(rewards[i])
             if self.config.return_mix:
                 ep.slots.append(int(slots[i]))
@@ -174,6 +174,18 @@ class BaseAgent(AgentState):
                     self.store_episode_returns(ep, bool(terminated[i]))
                 self.episodes += 1
                 eps[i] = self._start_episode(i)
+
+    @property
+    def bounds_seen(self) -> bool:
+        """Whether the targets' upper clamp follows the returns seen (``seen_bound_margin``)."""
+        return self.config.seen_bound_margin is not None
+
+    def observe_demonstrations(self, demos: Any) -> None:
+        """Fold every demonstrated episode into the returns seen (:meth:`observe_returns`), with
+        ``seen_bound_margin``; ``demos``: :class:`~mope.agent.demonstrations.Demonstrations` or None."""
+        if demos is not None and self.bounds_seen:
+            for start, end in demos.episode_bounds():
+                self.observe_returns(demos.rewards[start:end])
 
     def observe_returns(self, rewards: np.ndarray) -> None:
         """Fold one episode's ``(T, m)`` rewards into the range of returns seen (:func:`suffix_returns`) and
@@ -190,7 +202,7 @@ class BaseAgent(AgentState):
         returns seen (:func:`seen_upper_bound`) once an episode has ended, with ``seen_bound_margin``."""
         c = self.config
         high = self.q_high
-        if c.seen_bound_margin is not None and self.seen_returns is not None:
+        if self.bounds_seen and self.seen_returns is not None:
             high = seen_upper_bound(self.q_high, *self.seen_returns, c.seen_bound_margin)
         self._q_low_t = torch.as_tensor(self.q_low * c.reward_scale, dtype=torch.float32, device=self.device)
         self._q_high_t = torch.as_tensor(high * c.reward_scale, dtype=torch.float32, device=self.device)

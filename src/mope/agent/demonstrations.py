@@ -303,6 +303,10 @@ def load_demonstrations(path: str | Path, obs_shape: Sequence[int] | None = None
 # ------------------------------------------------------------------------------------------------------------
 # collection
 # ------------------------------------------------------------------------------------------------------------
+#: Where a demonstration starts: ``starts(rng, env) -> options`` for ``env.reset(options=...)`` (a scenario).
+Starts = Callable[[np.random.Generator, gym.Env], dict]
+
+
 class ScriptedPolicy(NamedTuple):
     """A registered scripted policy and the preferences it demonstrates (a range of ``w_0``, 2 objectives)."""
 
@@ -310,11 +314,15 @@ class ScriptedPolicy(NamedTuple):
     pref_range: tuple[float, float]
     #: Whether ``demos="scripted"`` (:func:`default_demonstrations`) uses it.
     default: bool = True
+    #: The scenario it demonstrates (:data:`Starts`); None: the environment's own resets. A policy shown only
+    #: in a scenario labels no other state (:func:`label_actions`).
+    starts: Starts | None = None
 
 
 def collect_demonstrations(env: gym.Env, policy: Policy | str, n_episodes: int,
                            pref_range: tuple[float, float] | None = None, seed: int = 0,
-                           max_steps: int | None = None, roll_in: int = 0) -> Demonstrations:
+                           max_steps: int | None = None, roll_in: int = 0, starts: Starts | None = None
+                           ) -> Demonstrations:
     """Roll out ``policy`` for ``n_episodes`` episodes and record every transition.
 
     Episode ``i`` starts from ``env.reset(seed=seed + i)`` and ends when the environment terminates or truncates
@@ -336,6 +344,9 @@ def collect_demonstrations(env: gym.Env, policy: Policy | str, n_episodes: int,
         roll_in: Each episode first takes ``k ~ U{0..roll_in}`` uniformly random actions (drawn from
             ``np.random.default_rng(seed + 1)``), which are not recorded; the demonstrator plays from there. An
             episode that ends during its roll-in records nothing. 0: no roll-in.
+        starts: ``starts(rng, env) -> options``: episode ``i`` resets with ``options=starts(rng, env)``, ``rng``
+            being ``np.random.default_rng(seed + 2)`` (a scenario, such as the game's chases). Default: the named
+            policy's registered scenario, else the environment's own resets.
 
     Returns:
         The episodes in order.
@@ -350,6 +361,9 @@ def collect_demonstrations(env: gym.Env, policy: Policy | str, n_episodes: int,
     n_actions = int(env.action_space.n)
     m = _reward_dim(env)
     act, pref_range, label = _resolve(env, policy, pref_range)
+    if starts is None and isinstance(policy, str):
+        starts = _lookup(_env_id(env), policy).starts
+    start_rng = np.random.default_rng(seed + 2)
     if pref_range is not None:
         pref_range = _check_range(pref_range, m)
     rng = np.random.default_rng(seed)
@@ -358,7 +372,9 @@ def collect_demonstrations(env: gym.Env, policy: Policy | str, n_episodes: int,
     roll_rng = np.random.default_rng(seed + 1) if roll_in else None  # its own stream: roll_in=0 changes nothing
     for i in range(n_episodes):
         pref = _draw_pref(rng, pref_range, m)
-        obs, steps, done = _roll_in(env, env.reset(seed=seed + i)[0], roll_rng, roll_in, n_actions, max_steps)
+        options = None if starts is None else starts(start_rng, env)
+        obs, steps, done = _roll_in(env, env.reset(seed=seed + i, options=options)[0], roll_rng, roll_in, n_actions,
+                                    max_steps)
         while not done:
             a = _as_action(act(obs, env), n_actions, label)
             next_obs, reward, terminated, truncated, _ = env.step(a)
@@ -421,9 +437,10 @@ def default_demonstrations(env_id: str) -> list[tuple[str, tuple[float, float]]]
 def label_actions(env_id: str, obs: np.ndarray, prefs: np.ndarray, envs: Sequence[gym.Env]) -> np.ndarray:
     """DAgger's labels (Ross et al. 2011): what the scripted demonstrators would do in the learner's own states.
 
-    Row ``i`` is labelled by the registered scripted policy (:func:`default_demonstrations`) whose preference
-    range holds ``prefs[i, 0]``, called as ``policy(obs[i], envs[i])`` while ``envs[i]`` is still in that state
-    (before it steps); ``-1`` where no demonstrator covers the preference (or none is registered).
+    Row ``i`` is labelled by the registered scripted policy (:func:`default_demonstrations`; not those shown only
+    in a scenario) whose preference range holds ``prefs[i, 0]``, called as ``policy(obs[i], envs[i])`` while
+    ``envs[i]`` is still in that state (before it steps); ``-1`` where no demonstrator covers the preference (or
+    none is registered).
 
     Args:
         env_id: The environment's registered id.
@@ -436,7 +453,10 @@ def label_actions(env_id: str, obs: np.ndarray, prefs: np.ndarray, envs: Sequenc
     """
     labels = np.full(len(obs), -1, dtype=np.int64)
     for name, (lo, hi) in default_demonstrations(env_id):
-        policy = _lookup(env_id, name).policy
+        entry = _lookup(env_id, name)
+        if entry.starts is not None:
+            continue
+        policy = entry.policy
         for i in np.flatnonzero((prefs[:, 0] >= lo) & (prefs[:, 0] <= hi) & (labels < 0)):
             labels[i] = _as_action(policy(obs[i], envs[i]), int(envs[i].action_space.n), name)
     return labels
@@ -607,6 +627,27 @@ def circle_policy(obs: np.ndarray, env: gym.Env, radius_share: float = 0.6, gain
     return _steer(g, desired, lookahead, brake)
 
 
+def chase_starts(rng: np.random.Generator, env: gym.Env, distance: tuple[float, float] = (0.5, 1.5),
+                 speed: tuple[float, float] = (0.3, 0.5)) -> dict:
+    """A chase of the confrontation game: blue ``distance`` m behind red (within 0.5 rad of red's tail), heading
+    at red (within 0.3 rad), both at ``speed``; red at least 1 m inside the walls, blue 0.3 m. Reset options.
+
+    The states that end in red leaving the arena (game-study: at the exit blue is behind red in 45-95 % of the
+    exits). From 200 of them (:func:`_measure_chases`, rng seed 0): pure pursuit leaves in 1 % of the games and
+    is caught in 13.5 %, the pursuer is caught in 96 %, driving straight on leaves in 100 %. Pursuit's discounted
+    utility is the best of the three up to w_catch 0.55 (-4.62, against -5.63 and -5.33), leaving's from 0.6.
+    """
+    half = _game(env).half
+    while True:
+        x, y = rng.uniform(-half + 1.0, half - 1.0, 2)
+        th = rng.uniform(-math.pi, math.pi)
+        d, off = rng.uniform(*distance), rng.uniform(-0.5, 0.5)
+        bx, by = x - d * math.cos(th + off), y - d * math.sin(th + off)
+        if max(abs(bx), abs(by)) < half - 0.3:
+            bth = math.atan2(y - by, x - bx) + rng.uniform(-0.3, 0.3)
+            return {"red": [x, y, th, rng.uniform(*speed)], "blue": [bx, by, bth, rng.uniform(*speed)]}
+
+
 #: Scripted policies per environment id: name -> (policy, range of ``w_0`` it demonstrates).
 #: For the confrontation game ``w_0`` is ``w_catch``: the pursuer is a catch policy, pursuit and circling are
 #: move policies (where pure pursuit and circling are the better of the reference policies, issue 31).
@@ -619,6 +660,9 @@ SCRIPTED_POLICIES: dict[str, dict[str, ScriptedPolicy]] = {
         "pursuer": ScriptedPolicy(pursuer_policy, (0.45, 1.0)),
         "pursuit": ScriptedPolicy(pursuit_policy, (0.0, 0.35)),
         "circle": ScriptedPolicy(circle_policy, (0.0, 0.3), default=False),
+        # Pure pursuit from chases: the best of pursuit, the pursuer and leaving from those starts up to
+        # w_catch 0.55 (_measure_chases), where the learner left the arena instead (game-study).
+        "evade": ScriptedPolicy(pursuit_policy, (0.0, 0.55), starts=chase_starts),
     },
 }
 
@@ -642,3 +686,26 @@ def _measure(n_games: int = 200, gamma: float = 0.99) -> None:  # pragma: no cov
         shares = outcome_shares(env, pol, n_games, seed=0)
         print(f"{name:8s} {', '.join(f'{k} {100 * v:.1f} %' for k, v in shares.items())}; discounted return "
               f"{np.round(disc / d.n_episodes, 2).tolist()}; {len(d)} steps")
+
+
+def _measure_chases(n_games: int = 200, gamma: float = 0.99) -> None:  # pragma: no cover - chase_starts' numbers
+    """Outcome shares and discounted returns of pursuit, the pursuer and driving straight on from ``n_games``
+    chases (:func:`chase_starts`, ``rng`` seed 0), and their utilities at w_catch 0.4 to 0.7."""
+    import mope.envs  # noqa: F401 - registers the game
+    from mope.envs import make_env
+
+    env = make_env("mope/RobotConfrontationDiscrete-v0")
+
+    def straight_on(obs: np.ndarray, e: gym.Env) -> int:
+        return snap_action(_game(e), _game(e).a_max, 0.0)
+
+    for name, pol in (("pursuit", pursuit_policy), ("pursuer", pursuer_policy), ("straight on", straight_on)):
+        d = collect_demonstrations(env, pol, n_games, pref_range=(0.5, 0.5), starts=chase_starts)
+        disc = np.zeros(2)
+        for s, e in d.episode_bounds():
+            disc += gamma ** np.arange(e - s) @ d.rewards[s:e].astype(np.float64)
+        disc /= d.n_episodes
+        outs = np.array([d.rewards[e - 1] for _, e in d.episode_bounds()])
+        print(f"{name:12s} red out {np.mean(outs[:, 1] <= -10):.1%}, blue wins {np.mean(outs[:, 0] <= -10):.1%}, "
+              f"red wins {np.mean(outs[:, 0] >= 10):.1%}; discounted {np.round(disc, 2).tolist()}; utility at "
+              f"w_catch 0.4/0.5/0.55/0.6/0.7: {[round(float(disc @ [w, 1 - w]), 2) for w in (0.4, 0.5, .55, .6, .7)]}")

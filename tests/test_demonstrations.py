@@ -265,6 +265,7 @@ def test_unreadable_files(tmp_path: Path) -> None:
     (DST, always(4), {}, "returned action 4, out of range: choose 0..3"),
     (DST, always(1.0), {}, "it must return one integer action"),
     (DST, 3, {}, "neither a callable"),
+    (DST, always(DOWN), {"starts": lambda rng, env: [1, 2]}, "starts returned list, not a dict of reset options"),
 ])
 def test_bad_collection_arguments(env_id: str, policy: object, kwargs: dict, expected: str) -> None:
     args = {"n_episodes": 1, **kwargs}
@@ -299,3 +300,53 @@ def test_config_roll_in_must_be_non_negative() -> None:
     with pytest.raises(ConfigError, match="demo_roll_in"):
         Config(demo_roll_in=-3)
     assert Config(demo_roll_in=20).demo_roll_in == 20
+
+
+# ------------------------------------------------------------------------------------------------------------
+# scenarios: demonstrations from chosen starts
+# ------------------------------------------------------------------------------------------------------------
+def test_chase_starts_put_blue_on_reds_tail() -> None:
+    from mope.agent.demonstrations import chase_starts
+    from mope.envs.confrontation import engagement_angles
+
+    env = make_env(GAME)
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        opts = chase_starts(rng, env)
+        env.reset(seed=0, options=opts)
+        game = env.unwrapped
+        q_r, q_b, _, d = engagement_angles(game.red, game.blue)
+        assert q_r > np.pi - 0.5 - 1e-9 and q_b < 0.3 + 1e-9 and 0.5 <= d <= 1.5  # behind red, heading at it
+        assert np.abs(game.red[:2]).max() <= game.half - 1.0 and np.abs(game.blue[:2]).max() < game.half - 0.3
+
+
+def test_a_scenario_policy_starts_every_episode_from_its_scenario() -> None:
+    from mope.agent.demonstrations import chase_starts, pursuit_policy
+
+    env = make_env(GAME)
+    named = collect_demonstrations(env, "evade", 4, seed=7)
+    # the same as pursuit with the scenario given by hand, drawn from default_rng(seed + 2)
+    by_hand = collect_demonstrations(env, pursuit_policy, 4, pref_range=(0.0, 0.55), seed=7, starts=chase_starts)
+    for key in ("obs", "actions", "rewards", "prefs"):
+        np.testing.assert_array_equal(getattr(named, key), getattr(by_hand, key))
+    rng = np.random.default_rng(9)
+    first = named.obs[0]
+    np.testing.assert_array_equal(first, make_env(GAME).reset(seed=7, options=chase_starts(rng, env))[0])
+    plain = collect_demonstrations(env, "pursuit", 4, seed=7)  # no scenario: the env's own resets
+    np.testing.assert_array_equal(plain.obs[0], make_env(GAME).reset(seed=7)[0])
+    assert named.prefs[:, 0].max() <= 0.55
+
+
+def test_pursuit_from_chases_stays_in_the_arena_where_driving_on_leaves() -> None:
+    from mope.agent.demonstrations import _game, chase_starts
+
+    env = make_env(GAME)
+
+    def straight_on(obs, e):
+        return snap_action(_game(e), _game(e).a_max, 0.0)
+
+    def out_share(policy) -> float:
+        d = collect_demonstrations(env, policy, 20, pref_range=(0.5, 0.5), starts=chase_starts)
+        return float(np.mean([d.rewards[e - 1, 1] <= -10 for _, e in d.episode_bounds()]))
+
+    assert out_share("pursuit") <= 0.05 and out_share(straight_on) >= 0.9

@@ -25,8 +25,11 @@ circle    [0, 0.3] (*)   0 %       0.5 %      0 %      99.0 %     (-12.66, 5.81)
 random    --             2.0 %     82.0 %     16.0 %   0 %        (-10.99, -0.01)
 ========  =============  ========  =========  =======  =========  ====================================
 
-(*) circle is not among ``demos="scripted"``'s sources (pursuit dominates it); the ranges of the other two
-stop 0.05 short of where their discounted utilities cross (w_catch = 0.39). 200 games each, reset seeds 0..199, the
+(*) circle is not among ``demos="scripted"``'s sources (pursuit dominates it); the ranges of pursuer and pursuit
+stop 0.05 short of where their discounted utilities cross (w_catch = 0.39). A fourth source, ``evade``, is pure
+pursuit shown from chases (blue on red's tail, :func:`chase_starts`) on w_catch [0, 0.55]: from those states it
+leaves the arena in 1 % of 200 games and is caught in 13.5 %, where the pursuer is caught in 96 % and driving on
+leaves in 100 % (``_measure_chases``); the learner's exits at w_catch 0.3-0.5 were such chases. 200 games each, reset seeds 0..199, the
 registered 150-step limit; circle also saw blue leave once. Measured
 with ``.venv/bin/python -c "from mope.agent.demonstrations import _measure; _measure(200)"`` (40 s on one core).
 For comparison, issue 31 measured the continuous pursuer at 61 % wins and pure pursuit at (-11.20, 7.11) on
@@ -373,6 +376,8 @@ def collect_demonstrations(env: gym.Env, policy: Policy | str, n_episodes: int,
     for i in range(n_episodes):
         pref = _draw_pref(rng, pref_range, m)
         options = None if starts is None else starts(start_rng, env)
+        if options is not None and not isinstance(options, dict):
+            raise DemonstrationError(f"starts returned {type(options).__name__}, not a dict of reset options")
         obs, steps, done = _roll_in(env, env.reset(seed=seed + i, options=options)[0], roll_rng, roll_in, n_actions,
                                     max_steps)
         while not done:

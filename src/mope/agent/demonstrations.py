@@ -368,33 +368,45 @@ def collect_demonstrations(env: gym.Env, policy: Policy | str, n_episodes: int,
     act, pref_range, label = _resolve(env, policy, pref_range)
     if starts is None and isinstance(policy, str):
         starts = _lookup(_env_id(env), policy).starts
-    start_rng = np.random.default_rng(seed + 2)
     if pref_range is not None:
         pref_range = _check_range(pref_range, m)
-    rng = np.random.default_rng(seed)
+    rng, start_rng = np.random.default_rng(seed), np.random.default_rng(seed + 2)
     env.action_space.seed(seed)  # a policy that samples the action space is reproducible too
     rows: dict[str, list[Any]] = {k: [] for k in KEYS}
     roll_rng = np.random.default_rng(seed + 1) if roll_in else None  # its own stream: roll_in=0 changes nothing
     for i in range(n_episodes):
         pref = _draw_pref(rng, pref_range, m)
-        options = None if starts is None else starts(start_rng, env)
-        if options is not None and not isinstance(options, dict):
-            raise DemonstrationError(f"starts returned {type(options).__name__}, not a dict of reset options")
-        obs, steps, done = _roll_in(env, env.reset(seed=seed + i, options=options)[0], roll_rng, roll_in, n_actions,
+        obs, steps, done = _roll_in(env, _reset(env, seed + i, starts, start_rng), roll_rng, roll_in, n_actions,
                                     max_steps)
-        while not done:
-            a = _as_action(act(obs, env), n_actions, label)
-            next_obs, reward, terminated, truncated, _ = env.step(a)
-            steps += 1
-            done = bool(terminated or truncated or (max_steps is not None and steps >= max_steps))
-            for k, v in (("obs", obs), ("actions", a), ("rewards", np.asarray(reward, np.float32).reshape(-1)),
-                         ("next_obs", next_obs), ("terminated", bool(terminated)), ("dones", done), ("prefs", pref)):
-                rows[k].append(v)
-            obs = next_obs
+        if not done:
+            _record(env, lambda o: _as_action(act(o, env), n_actions, label), obs, steps, pref, max_steps, rows)
     if not rows["obs"]:
         raise DemonstrationError(f"every one of the {n_episodes} episodes ended during its random roll-in "
                                  f"(roll_in={roll_in}): nothing was demonstrated; use a shorter roll-in")
     return Demonstrations(**{k: np.stack([np.asarray(v) for v in rows[k]]) for k in KEYS})
+
+
+def _reset(env: gym.Env, seed: int, starts: Starts | None, rng: np.random.Generator) -> Any:
+    """``env.reset(seed=seed)``, from the scenario ``starts`` draws with ``rng`` if one is given."""
+    options = None if starts is None else starts(rng, env)
+    if options is not None and not isinstance(options, dict):
+        raise DemonstrationError(f"starts returned {type(options).__name__}, not a dict of reset options")
+    return env.reset(seed=seed, options=options)[0]
+
+
+def _record(env: gym.Env, act: Callable[[Any], int], obs: Any, steps: int, pref: np.ndarray, max_steps: int | None,
+            rows: dict[str, list[Any]]) -> None:
+    """Play ``act`` from ``obs`` (``steps`` already taken) to the episode's end, appending each transition."""
+    done = False
+    while not done:
+        a = act(obs)
+        next_obs, reward, terminated, truncated, _ = env.step(a)
+        steps += 1
+        done = bool(terminated or truncated or (max_steps is not None and steps >= max_steps))
+        for k, v in (("obs", obs), ("actions", a), ("rewards", np.asarray(reward, np.float32).reshape(-1)),
+                     ("next_obs", next_obs), ("terminated", bool(terminated)), ("dones", done), ("prefs", pref)):
+            rows[k].append(v)
+        obs = next_obs
 
 
 def _check_counts(n_episodes: Any, max_steps: Any, roll_in: Any) -> None:

@@ -37,7 +37,7 @@ def seen_upper_bound(space_high: np.ndarray, seen_low: np.ndarray, seen_high: np
     ``margin`` times the range seen, whichever is lower (not in the paper).
 
     A target above every return any episode reached from any state is the max operator's upward drift feeding on
-    itself (minecart's Q-values climb to 150 where a trip brings 1.5); the margin leaves room for continuations
+    itself (minecart's Q-values climb to 161 where a trip brings 1.5); the margin leaves room for continuations
     that join the best pieces of several episodes.
     """
     return np.minimum(space_high, seen_high + margin * (seen_high - seen_low))

@@ -339,15 +339,12 @@ def test_a_scenario_policy_starts_every_episode_from_its_scenario() -> None:
 
 
 def test_pursuit_from_chases_stays_in_the_arena_where_driving_on_leaves() -> None:
-    from mope.agent.demonstrations import _game, chase_starts
+    from mope.agent.demonstrations import chase_starts, straight_on_policy
 
     env = make_env(GAME)
-
-    def straight_on(obs, e):
-        return snap_action(_game(e), _game(e).a_max, 0.0)
 
     def out_share(policy) -> float:
         d = collect_demonstrations(env, policy, 20, pref_range=(0.5, 0.5), starts=chase_starts)
         return float(np.mean([d.rewards[e - 1, 1] <= -10 for _, e in d.episode_bounds()]))
 
-    assert out_share("pursuit") <= 0.05 and out_share(straight_on) >= 0.9
+    assert out_share("pursuit") <= 0.05 and out_share(straight_on_policy) >= 0.9

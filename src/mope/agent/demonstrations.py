@@ -609,6 +609,12 @@ def _steer(g: Any, desired: float, lookahead: float, brake: float | None) -> int
     return snap_action(g, accel, float(np.clip(2.0 * err, -g.w_max, g.w_max)))
 
 
+def straight_on_policy(obs: np.ndarray, env: gym.Env) -> int:
+    """Full acceleration, no turn: what the learner did when chased (a baseline for :func:`chase_starts`)."""
+    g = _game(env)
+    return snap_action(g, g.a_max, 0.0)
+
+
 def pursuit_policy(obs: np.ndarray, env: gym.Env, lookahead: float = 2.5) -> int:
     """Pure pursuit snapped to the grid, with a wall guard: a move-heavy policy.
 
@@ -715,11 +721,7 @@ def _measure_chases(n_games: int = 200, gamma: float = 0.99) -> None:  # pragma:
     from mope.envs import make_env
 
     env = make_env("mope/RobotConfrontationDiscrete-v0")
-
-    def straight_on(obs: np.ndarray, e: gym.Env) -> int:
-        return snap_action(_game(e), _game(e).a_max, 0.0)
-
-    for name, pol in (("pursuit", pursuit_policy), ("pursuer", pursuer_policy), ("straight on", straight_on)):
+    for name, pol in (("pursuit", pursuit_policy), ("pursuer", pursuer_policy), ("straight on", straight_on_policy)):
         d = collect_demonstrations(env, pol, n_games, pref_range=(0.5, 0.5), starts=chase_starts)
         disc = np.zeros(2)
         for s, e in d.episode_bounds():

@@ -22,7 +22,7 @@ import torch
 
 from mope import make_agent
 from mope.agent import losses
-from mope.agent.agent import check_finite, flushed_denormals, update_statistics
+from mope.agent.agent import check_finite, flushed_denormals, margin_rows, update_statistics
 
 
 def timed_update(agent, times: dict[str, float]) -> None:  # noqa: ANN001 - a MoPE agent
@@ -38,7 +38,8 @@ def timed_update(agent, times: dict[str, float]) -> None:  # noqa: ANN001 - a Mo
     demo = agent._tensor(batch.indices < agent.buffer.reserved, torch.bool)
     y = agent._envelope_target(batch, w, acting, demo)
     t3 = t()
-    q, loss_rows, parts = agent._eql_loss(obs, actions, w, y, demo)
+    rows = margin_rows(c, agent.buffer, batch.indices, actions, demo)
+    q, loss_rows, parts = agent._eql_loss(obs, actions, w, y, rows)
     loss = (agent._tensor(batch.weights) * loss_rows).mean()
     check_finite(loss, q, y, agent.global_step)
     t4 = t()

@@ -202,6 +202,11 @@ def test_onehot_encoding_of_an_integer_box() -> None:
     out = enc(torch.tensor([[0, 3], [2, 1]]))
     expected = torch.tensor([[1, 0, 0, 0, 0, 0, 0, 1], [0, 0, 1, 0, 0, 1, 0, 0]], dtype=torch.float32)
     assert torch.equal(out, expected)
+    # coordinates of different sizes, and out-of-range values clamped to the edge indicators
+    enc = ObsEncoder(gym.spaces.Box(low=np.array([0, -1]), high=np.array([1, 2]), dtype=np.int64), "onehot")
+    out = enc(torch.tensor([[1, -1], [0, 2], [5, -4]]))
+    expected = torch.tensor([[0, 1, 1, 0, 0, 0], [1, 0, 0, 0, 0, 1], [0, 1, 1, 0, 0, 0]], dtype=torch.float32)
+    assert torch.equal(out, expected)
 
 
 def test_onehot_encoding_refuses_a_float_box() -> None:

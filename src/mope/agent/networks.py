@@ -76,6 +76,9 @@ class ObsEncoder(nn.Module):
             self.register_buffer("scale", torch.as_tensor(sizes, dtype=torch.int64))
             strides = np.concatenate([np.cumprod(sizes[::-1])[::-1][1:], [1]]) if sizes.size else sizes
             self.register_buffer("strides", torch.as_tensor(strides, dtype=torch.int64), persistent=False)
+            # where each coordinate's indicators start in the "onehot" features (12 + 12 for DST: 0 and 12)
+            offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]) if sizes.size else sizes
+            self.register_buffer("offsets", torch.as_tensor(offsets, dtype=torch.int64), persistent=False)
         elif isinstance(space, gym.spaces.Discrete):
             self.kind = "discrete"
             self.n = int(space.n)
@@ -106,9 +109,10 @@ class ObsEncoder(nn.Module):
         if self.kind in ("box_onehot", "box_joint"):
             idx = (obs.reshape(obs.shape[0], -1).long() - self.low).clamp_min(0)
             idx = torch.minimum(idx, self.scale - 1)
-            if self.kind == "box_joint":
-                return nn.functional.one_hot((idx * self.strides).sum(1), self.out_dim).float()
-            return torch.cat([nn.functional.one_hot(idx[:, i], n) for i, n in enumerate(self.sizes)], dim=1).float()
+            # the indicators written straight into zeros: the same floats as one_hot per coordinate and cat, in
+            # 3 ops instead of 3 per coordinate (one_hot also checks its input's range: 2 more reductions each)
+            flat = (idx * self.strides).sum(1, keepdim=True) if self.kind == "box_joint" else idx + self.offsets
+            return torch.zeros(len(idx), self.out_dim, device=idx.device).scatter_(1, flat, 1.0)
         return (obs.reshape(obs.shape[0], -1).float() - self.low) / self.scale
 
 

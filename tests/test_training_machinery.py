@@ -359,3 +359,22 @@ def test_readme_benchmark_table_is_the_committed_results() -> None:
     block = readme[start + len(README_MARKERS[0]):end].strip("\n") + "\n"
     assert block == readme_table(summary)
     assert block == (root / "docs/results/benchmark/readme_table.md").read_text()
+
+
+def test_benchmark_mope_bound_is_the_defaults_with_the_seen_return_bound(tmp_path: Path) -> None:
+    """The candidate default as a benchmark method: its jobs' configs, and its committed runs found by name."""
+    from mope.paper.benchmark import benchmark_jobs, finished_runs, summarise
+
+    jobs = benchmark_jobs(["four-room-v0"], ["mope", "mope-bound"], [0], quick=False, steps=None)
+    by_name = {j.name: j.payload for j in jobs}
+    assert by_name["four-room-v0-mope-bound-s0"]["seen_bound_margin"] == 0.1
+    assert by_name["four-room-v0-mope-s0"]["seen_bound_margin"] is None
+    assert by_name["four-room-v0-mope-bound-s0"]["eval_prefs"] == by_name["four-room-v0-mope-s0"]["eval_prefs"]
+    out = tmp_path / "bench"
+    _fake_bench_run(out, "four-room-v0", "mope-bound", 0, 50_000, 0.5)
+    _fake_bench_run(out, "four-room-v0", "mope", 0, 50_000, 0.25)
+    found = finished_runs(out)
+    assert sorted(j.name for j in found) == ["four-room-v0-mope-bound-s0", "four-room-v0-mope-s0"]
+    table = summarise(out, found)["four-room-v0"]
+    assert table["mope-bound"]["stats"]["eum"]["mean"] == pytest.approx(2.5)
+    assert table["mope"]["stats"]["eum"]["mean"] == pytest.approx(1.25)

@@ -5,7 +5,8 @@ One command trains and evaluates a grid of (environment, method, seed) in one ru
 own; a re-run keeps the finished jobs and resumes the interrupted ones), then writes one table and one figure
 per environment.
 
-Methods: ``mope`` and ``eql`` (the defaults), ``mope-paper`` and ``eql-paper`` (the paper preset), and
+Methods: ``mope`` and ``eql`` (the defaults), ``mope-paper`` and ``eql-paper`` (the paper preset), ``mope-bound``
+(the defaults with the seen-return bound, ``seen_bound_margin=0.1``: a candidate default, not one yet), and
 ``envelope`` (morl-baselines' Envelope at its example's settings, :data:`mope.paper.envelope.ENVELOPE_EXAMPLE`;
 needs the optional ``bench`` extra). Environments and their evaluation settings and budgets: :data:`BENCH_ENVS`.
 
@@ -85,7 +86,8 @@ BENCH_ENVS: dict[str, EnvBench] = {
 #: Methods: name -> config settings (``envelope`` is morl-baselines' Envelope).
 METHODS: dict[str, dict[str, Any]] = {"mope": {"algo": "mope"}, "eql": {"algo": "eql"},
                                       "mope-paper": {"algo": "mope", "preset": "paper"},
-                                      "eql-paper": {"algo": "eql", "preset": "paper"}, "envelope": {}}
+                                      "eql-paper": {"algo": "eql", "preset": "paper"},
+                                      "mope-bound": {"algo": "mope", "seen_bound_margin": 0.1}, "envelope": {}}
 DEFAULT_METHODS = ("mope", "eql", "mope-paper", "envelope")
 
 

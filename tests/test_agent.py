@@ -270,11 +270,15 @@ def test_reward_scale_must_be_positive():
         MoPE("deep-sea-treasure-v0", reward_scale=-1.0)
 
 
-def test_return_mix_pulls_a_looping_states_target_to_what_the_loop_returns():
+@pytest.mark.parametrize("bootstrap", [False, True])
+def test_return_mix_pulls_a_looping_states_target_to_what_the_loop_returns(bootstrap):
     """A greedy policy that bumps the seabed's wall forever: with an inflated value at s' the envelope target
     of eq. 4 is inflated too; return_mix blends in the loop's own return (time-limited), so the target of the
-    acting preference's row drops toward the truth, and only for fresh returns."""
-    agent = MoPE("deep-sea-treasure-v0", **{**SMALL, "per": False, "seed": 0}, return_mix=1.0, return_window=50)
+    acting preference's row drops toward the truth, and only for fresh returns. The loop's return ends at the time
+    limit; with ``return_timeout_bootstrap`` (mope < 0.3) it ends on the inflated value of the last state, which
+    kept the mirrored map's loops alive (docs/results/return-timeouts)."""
+    agent = MoPE("deep-sea-treasure-v0", **{**SMALL, "per": False, "seed": 0}, return_mix=1.0, return_window=50,
+                 return_timeout_bootstrap=bootstrap)
     inflate = [m for m in agent.target_net.modules() if isinstance(m, torch.nn.Linear)][-1]
     with torch.no_grad():  # every component of every action worth (30, 0) at every state
         inflate.weight.zero_()
@@ -291,7 +295,7 @@ def test_return_mix_pulls_a_looping_states_target_to_what_the_loop_returns():
     batch.indices[:] = 0  # the loop's first step: 40 steps of (0, -1), then the inflated (30, 0) discounted
     w = agent._tensor(agent.relabel(batch.prefs))
     y = agent._envelope_target(batch, w, agent._tensor(batch.prefs))
-    expect = np.array([0.99 ** 40 * 30.0, -(1 - 0.99 ** 40) / 0.01])
+    expect = np.array([0.99 ** 40 * 30.0 if bootstrap else 0.0, -(1 - 0.99 ** 40) / 0.01])
     np.testing.assert_allclose(y[:, 0].numpy(), np.tile(expect, (8, 1)), rtol=1e-4)
     assert (y[:, 1:, 0] > 29.0).all()  # the other preferences' rows keep eq. 4's (inflated) target
     agent.global_step = 40 + 50  # the return is now stale: eq. 4 alone

@@ -75,7 +75,7 @@ LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0, 
                                 "train_freq": 1, "demos": "", "demo_episodes": 100, "demo_margin": 0.8,
                                 "demo_loss_weight": 1.0, "demo_pretrain_steps": 0,
                                 "demo_batch_share": 0.0, "demo_roll_in": 0, "demo_label_weight": 0.0,
-                                "seen_bound_margin": None}
+                                "seen_bound_margin": None, "return_timeout_bootstrap": True}
 
 
 def check_preset(name: str) -> str:
@@ -220,7 +220,6 @@ class Config:
     total_steps: int = 20_000
     #: Episode time limit; ``None`` uses the limit the environment registers (100 on Deep-Sea-Treasure).
     max_episode_steps: int | None = None
-
     #: How observations enter the networks: "scale" (a bounded Box to [0, 1]), "onehot" (each coordinate of an
     #: integer Box one-hot), "joint" (a small integer Box's whole cell one-hot), "auto" (onehot if small, else scale).
     obs_encoding: str = "auto"
@@ -230,8 +229,7 @@ class Config:
     #: Q-network head: "conditioned" (the paper: omega is an input, one vector per action and objective) or
     #: "convex" (C return vectors per action; Q(s, a, w) is the one w prefers: mope.agent.networks.ConvexQNetwork).
     q_head: str = "convex"
-    #: C, return vectors per action of the convex head.
-    n_components: int = 12
+    n_components: int = 12  # C, return vectors per action of the convex head
     component_loss_weight: float = 1.0  # of the convex head's component loss (targets train their nearest component)
     hidden_sizes: tuple[int, ...] = (256, 256, 256)
     learning_rate: float = 3e-4
@@ -250,15 +248,16 @@ class Config:
     target_update_freq: int = 100
     #: Polyak averaging of the target network at every step with this weight; None: the hard copy above.
     target_tau: float | None = 0.005
-    #: Weight of the episode's greedy-tail return in the target row of its own preference (0: off;
-    #: mope.agent.losses.greedy_tail_returns; docs/results/return-mix); returns older than return_window are not used.
+    #: Weight of the episode's greedy-tail return in its own preference's target row (0: off; greedy_tail_returns in
+    #: mope.agent.losses, docs/results/return-mix), from returns at most return_window steps old. A tail the time limit
+    #: cut ends there (what the episode got), or with return_timeout_bootstrap on the target network's value of s_T.
     return_mix: float = 0.5
     return_window: int = 2_000
+    return_timeout_bootstrap: bool = False
     #: Stored steps of reward in every target row, each row cut at its own first non-greedy action
     #: (mope.agent.losses.watkins_n_step_targets; docs/results/n-step). 1: the one-step target of eq. 4.
     n_step: int = 1
-    #: Weight of the auxiliary loss: L = L^A + lb_weight * L^B. The paper uses 1.
-    lb_weight: float = 1.0
+    lb_weight: float = 1.0  # of the auxiliary loss: L = L^A + lb_weight * L^B (the paper uses 1)
     #: Homotopy of Yang et al.: the weight of L^B rises linearly from 0 to lb_weight over this many steps (0: off).
     lb_homotopy_steps: int = 0
     max_grad_norm: float | None = 1.0

@@ -232,7 +232,8 @@ class BaseAgent(AgentState):
     def store_episode_returns(self, episode: Episode, terminated: bool) -> None:
         """At an episode's end: the greedy-tail return of each of its transitions under the episode's preference
         (:func:`mope.agent.losses.greedy_tail_returns`, values of the target network, learner's units), into the
-        buffer."""
+        buffer. A tail the time limit cut ends there unless ``return_timeout_bootstrap``: a greedy policy that loops
+        until the limit then gets the return it really had, not one propped up by its own stale values."""
         slots = np.asarray(episode.slots, dtype=np.int64)
         if len(slots) == 0:
             return
@@ -241,8 +242,8 @@ class BaseAgent(AgentState):
         best = torch.einsum("tm,tam->ta", w, q).argmax(dim=1)
         values = q[torch.arange(len(slots), device=q.device), best].cpu().numpy()
         returns = losses.greedy_tail_returns(self.buffer.rewards[slots] * self.config.reward_scale, values,
-                                             np.asarray(episode.greedy, dtype=bool), terminated,
-                                             self.config.gamma)
+                                             np.asarray(episode.greedy, dtype=bool),
+                                             terminated or not self.config.return_timeout_bootstrap, self.config.gamma)
         self.buffer.set_returns(slots, returns, self.global_step)
 
     def _start_episode(self, i: int) -> Episode:

@@ -121,15 +121,17 @@ def greedy_tail_returns(rewards: np.ndarray, next_values: np.ndarray, greedy: np
 
     ``G_t = r_t + gamma * U_{t+1}``, where the value ``U_{t+1}`` of ``s_{t+1}`` is ``G_{t+1}`` if the action taken
     there was the greedy one, else ``V(s_{t+1})`` (the trace is cut where a random action was taken); after the
-    last step it is 0 if the episode terminated and ``V(s_T)`` if the time limit ended it. So ``G_t`` is the
-    return of taking ``a_t`` and then following the greedy policy of the episode's own preference as far as the
-    episode did: a target for ``Q(s_t, a_t, w_episode)`` that a looping greedy policy cannot inflate.
+    last step it is 0 if ``terminated`` and ``V(s_T)`` if not. So ``G_t`` is the return of taking ``a_t`` and then
+    following the greedy policy of the episode's own preference as far as the episode did: a target for
+    ``Q(s_t, a_t, w_episode)`` that a looping greedy policy cannot inflate. (The agent passes ``terminated=True``
+    for an episode the time limit ended as well, unless ``return_timeout_bootstrap``: a loop that runs until the
+    limit would otherwise end on its own stale value, ``gamma^k V(s_T)``.)
 
     Args:
         rewards: ``(T, m)`` the episode's rewards.
         next_values: ``(T, m)`` ``V(s_{t+1}) = Q(s_{t+1}, a*, w)`` under the episode's preference.
         greedy: ``(T,)`` whether each action was the greedy one.
-        terminated: Whether the last step ended the episode (not the time limit).
+        terminated: Whether nothing follows the last step (0 after it); False: ``V(s_T)`` follows.
         gamma: Discount factor.
 
     Returns:

@@ -250,10 +250,10 @@ class Config:
     target_tau: float | None = 0.005
     #: Weight of the episode's greedy-tail return in its own preference's target row (0: off; greedy_tail_returns in
     #: mope.agent.losses, docs/results/return-mix), from returns at most return_window steps old. A tail the time limit
-    #: cut ends there (what the episode got), or with return_timeout_bootstrap on the target network's value of s_T.
+    #: cut ends on the target network's value of s_T, or with return_timeout_bootstrap=False there (return-timeouts).
     return_mix: float = 0.5
     return_window: int = 2_000
-    return_timeout_bootstrap: bool = False
+    return_timeout_bootstrap: bool = True
     #: Stored steps of reward in every target row, each row cut at its own first non-greedy action
     #: (mope.agent.losses.watkins_n_step_targets; docs/results/n-step). 1: the one-step target of eq. 4.
     n_step: int = 1

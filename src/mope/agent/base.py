@@ -232,8 +232,9 @@ class BaseAgent(AgentState):
     def store_episode_returns(self, episode: Episode, terminated: bool) -> None:
         """At an episode's end: the greedy-tail return of each of its transitions under the episode's preference
         (:func:`mope.agent.losses.greedy_tail_returns`, values of the target network, learner's units), into the
-        buffer. A tail the time limit cut ends there unless ``return_timeout_bootstrap``: a greedy policy that loops
-        until the limit then gets the return it really had, not one propped up by its own stale values."""
+        buffer. A tail the time limit cut ends on ``V(s_T)``, or with ``return_timeout_bootstrap=False`` at the limit:
+        a greedy policy that loops until the limit then gets the return it really had, not one propped up by its own
+        stale values (docs/results/return-timeouts)."""
         slots = np.asarray(episode.slots, dtype=np.int64)
         if len(slots) == 0:
             return

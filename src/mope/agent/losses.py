@@ -123,8 +123,8 @@ def greedy_tail_returns(rewards: np.ndarray, next_values: np.ndarray, greedy: np
     there was the greedy one, else ``V(s_{t+1})`` (the trace is cut where a random action was taken); after the
     last step it is 0 if ``terminated`` and ``V(s_T)`` if not. So ``G_t`` is the return of taking ``a_t`` and then
     following the greedy policy of the episode's own preference as far as the episode did: a target for
-    ``Q(s_t, a_t, w_episode)`` that a looping greedy policy cannot inflate. (The agent passes ``terminated=True``
-    for an episode the time limit ended as well, unless ``return_timeout_bootstrap``: a loop that runs until the
+    ``Q(s_t, a_t, w_episode)`` that a looping greedy policy cannot inflate. (With ``return_timeout_bootstrap=False``
+    the agent passes ``terminated=True`` for an episode the time limit ended as well: a loop that runs until the
     limit would otherwise end on its own stale value, ``gamma^k V(s_T)``.)
 
     Args:

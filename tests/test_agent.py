@@ -208,6 +208,24 @@ def mirrored_map_at(steps: int, **overrides) -> tuple[dict[str, float], float]:
 
 
 @pytest.mark.slow
+def test_the_mirrored_map_does_not_diverge():
+    """Learning test of `return_mix` (the mirrored map's divergence, issue 12), about 3 minutes on one core.
+
+    Seed 2 is the seed that diverged with `return_mix: 0` (docs/results/dst-maps-no-return-mix): at 8k steps its
+    largest Q-value was 649 (the largest possible return is 124). Since commit 289b02d (the convex head's loss on
+    the taken action only: the same values, gradients summed in another order) the seed follows another trajectory:
+    at 8k steps the largest Q-value is 139.9 without `return_mix` and 120.9 with the default (0.5), both at CR 0.8
+    with 17 % and 26 % of the preferences looping (the mirrored map's open problem: not every seed keeps CR 1).
+    So the test holds the divergence signature only: a Q-value beyond any real return. (On the stream of
+    2026-12-05 the seed is at CR 1 at 8k, largest Q 123.8; it loses a treasure later, see the next test.)
+    """
+    final, q_max = mirrored_map_at(8_000)
+    assert q_max <= 130, q_max
+    assert final["overestimation"] <= 2.0, final
+    assert final["cr"] >= 0.6, final  # without return_mix the first stream ended at CR 0.5
+
+
+@pytest.mark.slow
 def test_the_mirrored_map_keeps_its_cover_when_loop_returns_end_at_the_time_limit():
     """Learning test of ``return_timeout_bootstrap=False`` (issue 33, docs/results/return-timeouts), about 2-4 minutes
     on one core.

@@ -38,7 +38,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from mope.agent import losses, targets
+from mope.agent import losses, optim, targets
 from mope.agent.agent_state import resolve_device
 from mope.agent.base import BaseAgent, Episode, linear_schedule
 from mope.agent.demonstrations import (
@@ -405,10 +405,11 @@ class MoPE(BaseAgent):
         demo = self._tensor(batch.indices < self.buffer.reserved, torch.bool)  # demonstrations (kept slots)
         y = self._envelope_target(batch, w, acting, demo)                                         # 4: eq. 4
         rows = margin_rows(c, self.buffer, batch.indices, actions, demo)  # J_E's rows (DQfD; DAgger labels)
-        q, loss_rows, parts = self._eql_loss(obs, actions, w, y, rows)                             # 4: eq. 4 + J_E
+        feats = self.q_net.encoder(obs)  # every network's encoder is the same parameter-free function: encode once
+        q, loss_rows, parts = self._eql_loss(obs, actions, w, y, rows, feats)                      # 4: eq. 4 + J_E
         loss = (self._tensor(batch.weights) * loss_rows).mean()
         check_finite(loss, q, y, self.global_step)
-        bonus, disc_loss = self._discriminator_loss(obs, batch.prefs)                              # 5: eq. 6
+        bonus, disc_loss = self._discriminator_loss(obs, batch.prefs, feats)                       # 5: eq. 6
         self._gradient_step(loss, disc_loss)  # 4, and 5's discriminator step: one Adam step each
         td = losses.preference_interval_td(q.detach(), y, w)                                      # 5: eq. 5
         self._set_priorities(batch, losses.priority(td, bonus, c.mi_alpha, c.per_eps, c.per_alpha))  # 5: eq. 7
@@ -416,14 +417,15 @@ class MoPE(BaseAgent):
         return self.last_losses
 
     def _eql_loss(self, obs: torch.Tensor, actions: torch.Tensor, w: torch.Tensor, y: torch.Tensor,
-                  rows: MarginRows | None) -> tuple[torch.Tensor, torch.Tensor, dict[str, torch.Tensor]]:
+                  rows: MarginRows | None, feats: torch.Tensor | None = None
+                  ) -> tuple[torch.Tensor, torch.Tensor, dict[str, torch.Tensor]]:
         """Q(s, a, w) of the taken actions and the per-transition loss: eq. 4 (with the L^B weight or homotopy of
         the config), plus the convex head's component loss and, on ``rows`` (:func:`margin_rows`), DQfD's margin
         loss J_E at the transition's own preference (row 0)."""
         c = self.config
         heads = 1
         if isinstance(self.q_net, ConvexQNetwork):  # every head learns the same targets (rows b*H + h)
-            comps = self.q_net.components(obs)  # (B, H, A, C, m)
+            comps = self.q_net.components(obs, feats)  # (B, H, A, C, m)
             heads = comps.shape[1]
             taken = comps[torch.arange(len(actions)), :, actions].flatten(0, 1)  # (B*H, C, m): the taken action's
             actions, w, y = (t.repeat_interleave(heads, dim=0) for t in (actions, w, y))
@@ -489,13 +491,13 @@ class MoPE(BaseAgent):
         """One Adam step of the Q-network on ``loss`` (gradient norm clipped) and, given ``disc_loss``, one of the
         discriminator; a single backward pass serves both, since their graphs share no parameter."""
         optimizers = [self.optimizer] + ([self.disc_optimizer] if self.disc_optimizer and disc_loss is not None else [])
-        for opt in optimizers:
-            opt.zero_grad(set_to_none=True)
+        for opt in optimizers:  # the torch calls' kernels without their bookkeeping (:mod:`mope.agent.optim`)
+            optim.zero_grads([p for group in opt.param_groups for p in group["params"]])
         (loss if disc_loss is None else loss + disc_loss).backward()
         if self.config.max_grad_norm is not None:
-            nn.utils.clip_grad_norm_(self._q_params, self.config.max_grad_norm)
+            optim.clip_grad_norm(self._q_params, self.config.max_grad_norm)
         for opt in optimizers:
-            opt.step()
+            optim.adam_step(opt)
 
     def _set_priorities(self, batch: Batch, priorities: np.ndarray) -> None:
         if not self.buffer.prioritized:
@@ -505,14 +507,14 @@ class MoPE(BaseAgent):
                                         "or inf")
         self.buffer.update_priorities(batch.indices, priorities)
 
-    def _discriminator_loss(self, obs: torch.Tensor, acting_prefs: np.ndarray
+    def _discriminator_loss(self, obs: torch.Tensor, acting_prefs: np.ndarray, feats: torch.Tensor | None = None
                             ) -> tuple[torch.Tensor | None, torch.Tensor | None]:
         """Eq. 6's term ``log q_phi(w|s) - log p(w)`` for the batch and q_phi's cross-entropy loss on ``(s, cell(w_b))``
         (stepped in :meth:`_gradient_step`); ``(None, None)`` without experience exploration."""
         if self.discriminator is None:
             return None, None
         cells_np = self.pref_sampler.partition.cell_of(acting_prefs)
-        log_q = self.discriminator.log_prob(obs, self._tensor(cells_np, torch.int64))
+        log_q = self.discriminator.log_prob(obs, self._tensor(cells_np, torch.int64), feats)
         log_p = self._tensor(self.pref_sampler.log_prob_cells(cells_np))
         return losses.mutual_information_bonus(log_q.detach(), log_p), -log_q.mean()
 

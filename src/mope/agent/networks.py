@@ -225,10 +225,12 @@ class ConvexQNetwork(nn.Module):
         self.n_critics = n_critics
         self.net = mlp(self.encoder.out_dim, hidden, n_critics * n_actions * n_components * n_objectives)
 
-    def components(self, obs: torch.Tensor) -> torch.Tensor:
-        """``(B, H, |A|, C, m)`` the return vectors of every head for raw observations ``(B, ...)``."""
-        return self.net(self.encoder(obs)).view(-1, self.n_critics, self.n_actions, self.n_components,
-                                                self.n_objectives)
+    def components(self, obs: torch.Tensor, feats: torch.Tensor | None = None) -> torch.Tensor:
+        """``(B, H, |A|, C, m)`` the return vectors of every head for raw observations ``(B, ...)``; ``feats``, if
+        given, is their encoding (``self.encoder(obs)``, which has no parameters: an update encodes a batch once for
+        every network)."""
+        x = self.encoder(obs) if feats is None else feats
+        return self.net(x).view(-1, self.n_critics, self.n_actions, self.n_components, self.n_objectives)
 
     @staticmethod
     def select(v: torch.Tensor, prefs: torch.Tensor) -> torch.Tensor:
@@ -341,6 +343,7 @@ class Discriminator(nn.Module):
         """``(B, N_I)`` logits for raw observations ``(B, ...)``."""
         return self.net(self.encoder(obs))
 
-    def log_prob(self, obs: torch.Tensor, cells: torch.Tensor) -> torch.Tensor:
-        """``log q_phi(cell | s)`` for each row."""
-        return torch.log_softmax(self(obs), dim=1).gather(1, cells.long().view(-1, 1)).squeeze(1)
+    def log_prob(self, obs: torch.Tensor, cells: torch.Tensor, feats: torch.Tensor | None = None) -> torch.Tensor:
+        """``log q_phi(cell | s)`` for each row; ``feats``, if given, is ``self.encoder(obs)``."""
+        logits = self.net(self.encoder(obs) if feats is None else feats)
+        return torch.log_softmax(logits, dim=1).gather(1, cells.long().view(-1, 1)).squeeze(1)

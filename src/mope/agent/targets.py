@@ -30,8 +30,9 @@ def one_step_target(q_net: nn.Module, target_net: nn.Module, buffer: ReplayBuffe
     rewards = _t(buffer.rewards[idx], dev) * cfg.reward_scale
     not_end = 1.0 - _t(buffer.terminated[idx], dev)[:, None, None]
     if _one_pass(q_net, cfg):  # the default: the convex head's double-Q values straight from its components
-        values, _ = ConvexQNetwork.double_q_values(q_net.components(next_obs)[:, 0],
-                                                   target_net.components(next_obs)[:, 0], w)
+        feats = q_net.encoder(next_obs)  # the same parameter-free encoder in both networks: encoded once
+        values, _ = ConvexQNetwork.double_q_values(q_net.components(next_obs, feats)[:, 0],
+                                                   target_net.components(next_obs, feats)[:, 0], w)
         return rewards.unsqueeze(1) + cfg.gamma * not_end * values
     env_prefs, envelope = losses.envelope_set(cfg.envelope_prefs, w, acting)
     q_next = target_net.forward_prefs(next_obs, env_prefs)
@@ -79,8 +80,9 @@ def values_after(q_net: nn.Module, target_net: nn.Module, next_obs: torch.Tensor
     w_rep = w.repeat_interleave(n, dim=0)
     if _one_pass(q_net, cfg):  # the default: one pass of each net, no select
         states, inverse = torch.unique(next_obs, dim=0, return_inverse=True)  # consecutive steps share states
-        return ConvexQNetwork.double_q_values(q_net.components(states)[inverse, 0],
-                                              target_net.components(states)[inverse, 0], w_rep)
+        feats = q_net.encoder(states)
+        return ConvexQNetwork.double_q_values(q_net.components(states, feats)[inverse, 0],
+                                              target_net.components(states, feats)[inverse, 0], w_rep)
     env_prefs, envelope = losses.envelope_set(cfg.envelope_prefs, w, acting)
     env_prefs = env_prefs.repeat_interleave(n, dim=0)
     q_next = target_net.forward_prefs(next_obs, env_prefs)

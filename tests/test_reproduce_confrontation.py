@@ -12,7 +12,13 @@ import pytest
 import mope.envs.confrontation as C
 from mope.errors import ConfigError, MopeError
 from mope.evaluation.video import VideoError, record_video
-from mope.paper.confrontation import reproduce_confrontation, speed_class, strategy_diversity, summarize
+from mope.paper.confrontation import (
+    acceptance_scores,
+    reproduce_confrontation,
+    speed_class,
+    strategy_diversity,
+    summarize,
+)
 from mope.paper.ppo import Episodes, play_episodes, train_ppo
 
 
@@ -50,6 +56,16 @@ def test_strategy_diversity_counts_outcome_and_speed_types() -> None:
     d = strategy_diversity(outcomes, np.array([0.45, 0.45, 0.45, 0.05]), 0.5)
     # (red_win, fast) twice, (blue_win, fast), (running, slow): 3 strategies, entropy of (1/2, 1/4, 1/4) = 1.5
     assert d == {"strategies": 3, "entropy_bits": pytest.approx(1.5)}
+
+
+def test_acceptance_scores_pool_the_exits_at_low_catch_weights_and_keep_the_worst() -> None:
+    outs = {0.0: 0.0, 0.1: 0.0, 0.2: 0.02, 0.3: 0.04, 0.4: 0.12, 0.5: 0.02}
+    rates = {w: {"win": w / 2, "out": o} for w, o in outs.items()}
+    rates.update({w: {"win": w / 2, "out": 0.5} for w in (0.7, 0.8, 0.9, 1.0)})
+    s = acceptance_scores(np.array([1.0, 2.0]), np.array([0.5, 2.5]), rates)
+    assert s["out_lo"] == pytest.approx(0.2 / 6) and s["out_lo_max"] == pytest.approx(0.12)
+    assert s["win_hi"] == pytest.approx(0.45) and s["win_0.7"] == pytest.approx(0.35)
+    assert (s["eu"], s["eu_envelope"], s["eu_gap"]) == pytest.approx((1.5, 1.5, 0.0))
 
 
 def test_summarize_rates_and_hypervolume() -> None:

@@ -166,12 +166,14 @@ def acceptance_scores(utility: np.ndarray, ref_utility: np.ndarray, rates: dict[
 
     Returns:
         ``eu``, ``eu_envelope``, ``eu_gap`` (eu minus the envelope), ``win_<w>`` per catch weight, ``win_hi`` (mean
-        win share at w_catch 1, 0.9, 0.8) and ``out_lo_max`` (the largest out-of-arena share at w_catch <= 0.5).
+        win share at w_catch 1, 0.9, 0.8), ``out_lo`` (the out-of-arena share of all games at w_catch <= 0.5,
+        pooled as ``win_hi`` pools the wins) and ``out_lo_max`` (the largest share at any one of those weights).
     """
     return {"eu": float(np.mean(utility)), "eu_envelope": float(np.mean(ref_utility)),
             "eu_gap": float(np.mean(utility - ref_utility)),
             **{f"win_{w:g}": float(rates[w]["win"]) for w in WIN_PREFS},
             "win_hi": float(np.mean([rates[w]["win"] for w in (1.0, 0.9, 0.8)])),
+            "out_lo": float(np.mean([rates[w]["out"] for w in OUT_PREFS])),
             "out_lo_max": float(max(rates[w]["out"] for w in OUT_PREFS))}
 
 
@@ -339,7 +341,7 @@ def evaluate_confrontation(out: Path, seeds: Sequence[int], ppo_prefs: int, eval
     return per_seed, games
 
 
-SCORE_KEYS = ("eu", "eu_envelope", "eu_gap", *(f"win_{w:g}" for w in WIN_PREFS), "win_hi", "out_lo_max")
+SCORE_KEYS = ("eu", "eu_envelope", "eu_gap", *(f"win_{w:g}" for w in WIN_PREFS), "win_hi", "out_lo", "out_lo_max")
 
 
 def confrontation_results(out: Path, per_seed: dict[str, list[dict[str, Any]]], seeds: Sequence[int]
@@ -401,19 +403,23 @@ def scores_table(results: dict[str, Any], seeds: int, episodes: int, eval_prefs:
     def ci(d: dict[str, Any], fmt: str) -> str:
         return f"{d['mean']:{fmt}}" if seeds == 1 else f"{d['mean']:{fmt}} [{d['ci95'][0]:{fmt}}, {d['ci95'][1]:{fmt}}]"
 
-    header = ["method", "win @ w_catch 1 / 0.9 / 0.8 / 0.7", "win, w_catch 0.8-1", "max out, w_catch <= 0.5",
+    header = ["method", "win @ w_catch 1 / 0.9 / 0.8 / 0.7", "win, w_catch 0.8-1", "out, w_catch 0-0.5",
+              "max out, w_catch <= 0.5",
               f"discounted EU ({eval_prefs} prefs)", "EU - references' envelope"]
     rows = []
     for m in (*METHODS, "scripted pursuer"):
         r = results[m]
         rows.append([LABELS.get(m, f"reference: {m}"), " / ".join(f"{r[f'win_{w:g}']['mean']:.2f}" for w in WIN_PREFS),
-                     ci(r["win_hi"], ".3f"), f"{r['out_lo_max']['mean']:.3f} (max {max(r['out_lo_max']['seeds']):.2f})",
+                     ci(r["win_hi"], ".3f"), ci(r["out_lo"], ".3f"),
+                     f"{r['out_lo_max']['mean']:.3f} (max {max(r['out_lo_max']['seeds']):.2f})",
                      ci(r["eu"], ".3f"), ci(r["eu_gap"], "+.3f")])
     env = results["scripted pursuer"]["eu_envelope"]["mean"]
     return (markdown_table(header, rows) + f"\n\n{seeds} seed(s), {episodes} common start states (reset seeds "
             f"{EVAL_SEED}..{EVAL_SEED + episodes - 1}); references' upper envelope of discounted EU: {env:.3f}. "
-            "Mean over seeds [bootstrap 95 % CI over seeds]; max out: the mean over seeds of each seed's largest "
-            "out-of-arena share at w_catch 0, 0.1, ..., 0.5 (and the largest of any seed).")
+            "Mean over seeds [bootstrap 95 % CI over seeds]; out: the share of all games at w_catch 0, 0.1, ..., "
+            "0.5 that end out of the arena (pooled over the six weights, as the win share pools w_catch 0.8-1); "
+            "max out: the mean over seeds of each seed's largest share at one of those weights (and the largest of "
+            "any seed).")
 
 
 def reproduce_confrontation(out: str | Path, seeds: int | str | Sequence[int] = 1, steps: int = 15_000,

@@ -491,13 +491,8 @@ class MoPE(BaseAgent):
         """One Adam step of the Q-network on ``loss`` (gradient norm clipped) and, given ``disc_loss``, one of the
         discriminator; a single backward pass serves both, since their graphs share no parameter."""
         optimizers = [self.optimizer] + ([self.disc_optimizer] if self.disc_optimizer and disc_loss is not None else [])
-        for opt in optimizers:  # the torch calls' kernels without their bookkeeping (:mod:`mope.agent.optim`)
-            optim.zero_grads([p for group in opt.param_groups for p in group["params"]])
-        (loss if disc_loss is None else loss + disc_loss).backward()
-        if self.config.max_grad_norm is not None:
-            optim.clip_grad_norm(self._q_params, self.config.max_grad_norm)
-        for opt in optimizers:
-            optim.adam_step(opt)
+        optim.gradient_step(optimizers, loss if disc_loss is None else loss + disc_loss, self._q_params,
+                            self.config.max_grad_norm)
 
     def _set_priorities(self, batch: Batch, priorities: np.ndarray) -> None:
         if not self.buffer.prioritized:

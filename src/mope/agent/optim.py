@@ -68,3 +68,16 @@ def adam_step(opt: torch.optim.Optimizer) -> None:
         torch._fused_adam_(params, grads, exp_avgs, exp_avg_sqs, [], steps, amsgrad=False, lr=group["lr"],
                            beta1=beta1, beta2=beta2, weight_decay=group["weight_decay"], eps=group["eps"],
                            maximize=group["maximize"], grad_scale=None, found_inf=None)
+
+
+def gradient_step(optimizers: Sequence[torch.optim.Optimizer], loss: torch.Tensor, clipped: Sequence[torch.Tensor],
+                  max_norm: float | None) -> None:
+    """Zero every optimizer's gradients, backpropagate ``loss``, clip the gradient norm of ``clipped`` to
+    ``max_norm`` (None: no clip) and step each optimizer: the torch calls' kernels without their bookkeeping."""
+    for opt in optimizers:
+        zero_grads([p for group in opt.param_groups for p in group["params"]])
+    loss.backward()
+    if max_norm is not None:
+        clip_grad_norm(clipped, max_norm)
+    for opt in optimizers:
+        adam_step(opt)

@@ -60,11 +60,13 @@ class SumTree:
                 tree[node] = tree[2 * node] + tree[2 * node + 1]
                 node >>= 1
             return
-        nodes = np.unique(self.size + idx)  # sorted and distinct; a parent's sorted duplicates are neighbours
+        # Level by level, each touched parent from its two children: row p of the (size, 2) view is (tree[2p],
+        # tree[2p + 1]), so one gather and one row sum per level (a parent touched twice gets the same sum twice).
+        pairs = tree.reshape(-1, 2)
+        nodes = self.size + idx
         for _ in range(self.depth):
             nodes = nodes >> 1
-            nodes = nodes[np.concatenate(([True], nodes[1:] != nodes[:-1]))]
-            tree[nodes] = tree[2 * nodes] + tree[2 * nodes + 1]
+            tree[nodes] = pairs[nodes].sum(axis=1)
 
     def find(self, values: np.ndarray) -> np.ndarray:
         """Leaf index whose prefix-sum interval contains each value in ``values`` (all in ``[0, total)``)."""

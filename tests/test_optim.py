@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 from torch import nn
+from torch.optim import optimizer as torch_optimizer
 
 from mope.agent import optim
 
@@ -65,3 +66,17 @@ def test_adam_step_falls_back_to_torch_where_it_does_not_apply() -> None:
     optim.adam_step(opt)
     assert len(calls) == 2
     assert all(int(s["step"]) == 2 for s in opt.state.values())
+
+
+def test_adam_step_runs_global_optimizer_hooks_through_torch() -> None:
+    net = _net(0)
+    opt = torch.optim.Adam(net.parameters(), lr=1e-2, fused=True)
+    (net(torch.ones(1, 5)) ** 2).sum().backward()
+    optim.adam_step(opt)
+    calls = []
+    handle = torch_optimizer.register_optimizer_step_post_hook(lambda *_: calls.append(1))
+    try:
+        optim.adam_step(opt)
+    finally:
+        handle.remove()
+    assert calls == [1]

@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import torch
+from torch.optim import optimizer as torch_optimizer
 
 
 def zero_grads(params: Sequence[torch.Tensor]) -> None:
@@ -39,12 +40,13 @@ def adam_step(opt: torch.optim.Optimizer) -> None:
     """``opt.step()`` for a fused Adam (``torch.optim.Adam(..., fused=True)``) with one parameter group whose
     parameters all have gradients and already have state: the step counters' increment and the fused kernel, as
     torch's ``_fused_adam`` calls them. Any other case (the first step, a missing gradient, amsgrad, several
-    groups or devices, an optimizer with hooks) is ``opt.step()`` itself."""
+    groups or devices, step hooks on the optimizer or global ones) is ``opt.step()`` itself."""
     groups = opt.param_groups
     group = groups[0]
     if (len(groups) != 1 or not group.get("fused") or group["amsgrad"] or group.get("differentiable")
             or group.get("decoupled_weight_decay") or isinstance(group["lr"], torch.Tensor)
             or opt._optimizer_step_pre_hooks or opt._optimizer_step_post_hooks
+            or torch_optimizer._global_optimizer_pre_hooks or torch_optimizer._global_optimizer_post_hooks
             or getattr(opt, "grad_scale", None) is not None or getattr(opt, "found_inf", None) is not None):
         opt.step()
         return

@@ -255,6 +255,22 @@ def test_maxmin_heads_train_save_and_load(tmp_path):
     np.testing.assert_array_equal(back.q_values(obs, w), agent.q_values(obs, w))
 
 
+@pytest.mark.parametrize("heads", [1, 2])
+def test_eql_loss_reads_the_taken_actions_components_of_every_head(heads):
+    """The loss's Q of the taken action, head by head, is what indexing the components directly gives."""
+    agent = MoPE("deep-sea-treasure-v0", **SMALL, n_critics=heads, total_steps=300)
+    agent.train(300)
+    batch = agent.buffer.sample(16, np.random.default_rng(0), 1.0)
+    obs, actions = agent._tensor(batch.obs), agent._tensor(batch.actions, torch.int64)
+    w = agent._tensor(agent.relabel(batch.prefs))
+    y = torch.randn(*w.shape)
+    q, loss_rows, _ = agent._eql_loss(obs, actions, w, y, None)
+    comps = agent.q_net.components(obs)[torch.arange(16), :, actions]  # (B, H, C, m)
+    ref = torch.stack([agent.q_net.select_one(comps[:, h], w) for h in range(heads)], dim=1).mean(1)
+    torch.testing.assert_close(q, ref)
+    assert loss_rows.shape == (16,) and torch.isfinite(loss_rows).all()
+
+
 def test_reward_scale_scales_the_targets_and_reports_q_in_the_environments_units():
     """An agent learning on rewards x 2 whose networks output 2x another's Q: its targets are exactly 2x the other's
     (the clamp included), while the Q-values it reports and its greedy actions are the other's. (return_mix off:

@@ -23,6 +23,7 @@ from mope.agent.losses import (
     priority,
     taken_action_q,
     watkins_n_step_targets,
+    weighted,
 )
 
 # Envelope preferences (K = 2) and the designed Q_target(s'_b, a, w') for A = 3 actions, m = 2 objectives.
@@ -216,6 +217,15 @@ def test_eql_loss_zero_at_target_and_gradient_flows_to_q() -> None:
     loss.sum().backward()
     # d/dQ mean_i ||y_i - Q_i||^2 = -2 (y - Q) / N
     torch.testing.assert_close(q.grad, -2.0 * (Y - Q) / 2.0)
+
+
+def test_weighted_skips_only_a_unit_weight_and_keeps_values_and_gradients() -> None:
+    x = torch.tensor([1.5, -2.0], requires_grad=True)
+    assert weighted(1.0, x) is x and weighted(1, x) is x
+    torch.testing.assert_close(weighted(0.5, x), torch.tensor([0.75, -1.0]))
+    torch.testing.assert_close(weighted(torch.tensor([2.0, 1.0]), x), torch.tensor([3.0, -2.0]))
+    weighted(3.0, x).sum().backward()
+    torch.testing.assert_close(x.grad, torch.tensor([3.0, 3.0]))
 
 
 # ------------------------------------------------------------------------------------------- eq. 5

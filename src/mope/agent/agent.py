@@ -426,10 +426,12 @@ class MoPE(BaseAgent):
         heads = 1
         if isinstance(self.q_net, ConvexQNetwork):  # every head learns the same targets (rows b*H + h)
             comps = self.q_net.components(obs, feats)  # (B, H, A, C, m)
-            heads = comps.shape[1]
-            taken = comps[torch.arange(len(actions)), :, actions].flatten(0, 1)  # (B*H, C, m): the taken action's
-            actions, w, y = (t.repeat_interleave(heads, dim=0) for t in (actions, w, y))
-            rows = rows.repeat(heads) if rows is not None else None
+            b, heads, _, n_comp, m = comps.shape
+            taken = comps.gather(2, actions.view(b, 1, 1, 1, 1).expand(b, heads, 1, n_comp, m)).view(
+                b * heads, n_comp, m)  # (B*H, C, m): the taken action's components
+            if heads > 1:
+                actions, w, y = (t.repeat_interleave(heads, dim=0) for t in (actions, w, y))
+                rows = rows.repeat(heads) if rows is not None else None
             q = self.q_net.select_one(taken, w)  # (B*H, N, m)
             comp_loss = losses.component_loss(taken, y, c.component_anchor_weight)
             if rows is not None:  # w^T Q(s, a, w) of every action at the demonstrated preference (row 0)
@@ -451,10 +453,10 @@ class MoPE(BaseAgent):
             loss_rows, l_a, l_b = losses.eql_loss(q, y, w, c.lb_weight)
         parts = {"loss_a": l_a, "loss_b": l_b}
         if comp_loss is not None:
-            loss_rows = loss_rows + c.component_loss_weight * comp_loss
+            loss_rows = loss_rows + losses.weighted(c.component_loss_weight, comp_loss)
             parts["loss_components"] = comp_loss
         if margin is not None:
-            loss_rows = loss_rows + rows.weight * margin
+            loss_rows = loss_rows + losses.weighted(rows.weight, margin)
             parts["loss_margin"] = margin
         if heads > 1:  # per transition: the heads' losses summed, their statistics and Q averaged
             loss_rows = loss_rows.view(-1, heads).sum(1)
@@ -466,7 +468,7 @@ class MoPE(BaseAgent):
         c = self.config
         return linear_schedule(c.per_beta_start, 1.0, c.total_steps, self.global_step)
 
-    @torch.no_grad()
+    @torch.inference_mode()
     def _envelope_target(self, batch: Batch, w: torch.Tensor, acting: torch.Tensor,
                          demo: torch.Tensor | None = None) -> torch.Tensor:
         """Target y of eq. 4 (:mod:`mope.agent.targets`: one step, or ``n_step`` with each row's Watkins cut, none on

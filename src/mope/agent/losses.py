@@ -193,7 +193,15 @@ def eql_loss(q: torch.Tensor, y: torch.Tensor, prefs: torch.Tensor, lb_weight: f
     diff = y - q
     l_a = objective_sum(diff * diff).mean(1)
     l_b = objective_sum(prefs * diff).abs().mean(1)
-    return l_a + lb_weight * l_b, l_a, l_b
+    return l_a + weighted(lb_weight, l_b), l_a, l_b
+
+
+def weighted(weight: float | torch.Tensor, x: torch.Tensor) -> torch.Tensor:
+    """``weight * x``, without the multiplication when ``weight`` is the number 1 (the same values and gradients,
+    one tensor operation and its backward fewer)."""
+    if not torch.is_tensor(weight) and weight == 1.0:
+        return x
+    return weight * x
 
 
 def component_loss(components: torch.Tensor, y: torch.Tensor, anchor_weight: float = 0.0) -> torch.Tensor:

@@ -54,8 +54,8 @@ from mope.experiments.locks import FolderLock
 METHODS = ("ppo", "eql", "mope-nodemo", "mope")
 #: The preference-conditioned agents and what each changes in the game's defaults (mope.config.ENV_DEFAULTS).
 LEARNERS: dict[str, tuple[str, dict[str, Any]]] = {
-    "eql": ("eql", {"demos": "", "demo_batch_share": 0.0}),
-    "mope-nodemo": ("mope", {"demos": "", "demo_batch_share": 0.0}),
+    "eql": ("eql", {"demos": "", "demo_batch_share": 0.0, "demo_pretrain_steps": 0}),
+    "mope-nodemo": ("mope", {"demos": "", "demo_batch_share": 0.0, "demo_pretrain_steps": 0}),
     "mope": ("mope", {}),
 }
 LABELS = {"ppo": "PPO, one policy per preference", "eql": "EQL (no demonstrations)",

@@ -158,6 +158,7 @@ def test_make_agent_with_an_env_id_brings_the_environment_defaults() -> None:
 
     agent = make_agent("mope", C.DISCRETE_ID, demo_episodes=1)
     assert agent.config.n_envs == 4 and agent.config.demos == "scripted" and agent.buffer.reserved > 0
+    assert agent.config.demo_pretrain_steps == 5_000  # DQfD's pre-training: fewer exits over 10 seeds of 200k
     assert make_agent("eql", C.DISCRETE_ID, demos="", n_envs=2).config.n_envs == 2
 
 

@@ -47,6 +47,20 @@ def test_pretraining_makes_the_greedy_policy_imitate_the_demonstrator(tmp_path) 
     assert (q[1] - q[[0, 2, 3]]).min() > 0.5  # by about the margin (0.8)
 
 
+def test_the_progress_bar_says_when_pretraining_runs_and_a_resumed_agent_does_not_pretrain(tmp_path) -> None:
+    from mope.agent.runner import ProgressBar, will_pretrain
+
+    path, _ = dst_demos(tmp_path)
+    agent = MoPE("deep-sea-treasure-v0", **SMALL, demos=str(path), demo_pretrain_steps=7)
+    assert will_pretrain(agent) and not will_pretrain(MoPE("deep-sea-treasure-v0", **SMALL, demos=str(path)))
+    bar = ProgressBar()
+    bar.on_training_start(agent, 3)
+    assert "pre-training on the demonstrations: 7 updates" in str(bar.bar)
+    bar.bar.close()
+    agent.train(2, callback=bar)  # a new bar, whose first step clears the note
+    assert "pre-training" not in str(bar.bar) and not will_pretrain(agent)  # once it has stepped, never again
+
+
 def test_without_the_margin_loss_pretraining_does_not_imitate(tmp_path) -> None:
     """The same pre-training with demo_loss_weight=0 (demonstrations replayed, no J_E): no margin appears."""
     path, _ = dst_demos(tmp_path)

@@ -41,6 +41,13 @@ class Agent(Protocol):
     def pretrain(self) -> Any: ...
 
 
+def will_pretrain(agent: Agent) -> bool:
+    """Whether :func:`train` starts with DQfD's pre-training: ``demo_pretrain_steps`` > 0 and only demonstrations
+    in replay so far (a fresh agent; a resumed one has already pre-trained)."""
+    return bool(getattr(agent.config, "demo_pretrain_steps", 0)) and agent.global_step == 0 \
+        and agent.buffer.reserved > 0 and len(agent.buffer) == agent.buffer.reserved
+
+
 class Callback:
     """Hooks of :func:`train`. Return False from :meth:`on_step` to stop training at that step boundary."""
 
@@ -105,7 +112,7 @@ def train(agent: Agent, total_steps: int, callback: Callback | Sequence[Callback
     t0 = time.perf_counter()
     agent.train_started = t0  # type: ignore[attr-defined] - lets callbacks report wall time mid-call
     cb.on_training_start(agent, total_steps)
-    if agent.global_step == 0 and len(agent.buffer) == agent.buffer.reserved:  # only demonstrations so far
+    if will_pretrain(agent):
         agent.pretrain()
     end = agent.global_step + total_steps
     stopped = False
@@ -193,8 +200,12 @@ class ProgressBar(Callback):
         c = agent.config
         self.bar = tqdm(total=total_steps, desc=self.desc or f"{c.algo} {c.env_id}", unit="step",
                         dynamic_ncols=True, mininterval=0.5)
+        if will_pretrain(agent):  # the updates before the first env step, so that the bar does not look stuck
+            self.bar.set_postfix_str(f"pre-training on the demonstrations: {c.demo_pretrain_steps} updates")
 
     def on_step(self, agent: Agent, stats: dict[str, float] | None) -> bool:
+        if self.bar.n == 0:
+            self.bar.set_postfix_str("", refresh=False)
         self.bar.update(agent.config.n_envs)
         records = self.eval_callback.records if self.eval_callback is not None else []
         if len(records) != self._shown:

@@ -175,7 +175,7 @@ def test_confrontation_seeds_take_a_count_a_range_or_a_list() -> None:
 def test_reproduce_confrontation_tiny(tmp_path) -> None:
     r = reproduce_confrontation(tmp_path, steps=250, ppo_prefs=2, eval_prefs=3, episodes=2, workers=1,
                                 progress=False, n_omega=4, learning_starts=100, demo_episodes=2,
-                                    demo_pretrain_steps=20)
+                                demo_pretrain_steps=20)
     for name in ("fig5_front.png", "fig6_trajectories.png", "table.md", "results.json"):
         assert (tmp_path / name).is_file()
     res = json.loads((tmp_path / "results.json").read_text())["results"]

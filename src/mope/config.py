@@ -61,8 +61,8 @@ PRESETS: dict[str, dict[str, Any]] = {
 #: Per-environment defaults: ``mope train --env ID`` and ``MoPE(ID)`` use them for every setting not given (by a
 #: flag, ``--set``, a config file or a keyword); a preset other than ``mope`` (``--preset paper``) skips them. Each
 #: is the recipe its environment's study chose (docs/results/game-study for the robot game: 4 envs, one update per
-#: 4 env steps, beat 8 envs on both seeds of an 80k-step probe, at about 1.8x the wall time; 5,000 pre-training
-#: updates on the demonstrations, ahead of none on wins, exits and EU over 10 seeds of 200k steps).
+#: 4 env steps, beat 8 envs on both seeds of an 80k-step probe, at about 1.8x the wall time; 5,000 DQfD
+#: pre-training updates on the demonstrations beat none on wins, exits and EU over 10 seeds of 200k steps).
 ENV_DEFAULTS: dict[str, dict[str, Any]] = {
     "mope/RobotConfrontationDiscrete-v0": {"n_envs": 4, "buffer_size": 100_000, "demos": "scripted",
                                            "demo_episodes": 50, "demo_batch_share": 0.25,

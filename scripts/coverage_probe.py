@@ -163,8 +163,8 @@ name, overrides = sys.argv[1], json.loads(sys.argv[2])
 if "double-components" in sys.argv[3:]:
     ConvexQNetwork.double_q_values = staticmethod(double_components)
     # the one-step path reads the convex head through forward_prefs; route it through the n-step code (n = 1)
-    targets.one_step_target = lambda q, t, buf, idx, w, acting, c: targets.n_step_target(q, t, buf, idx, w, acting,
-                                                                                          c, 1)
+    targets.one_step_target = lambda q, t, buf, idx, w, acting, c, scale: targets.n_step_target(
+        q, t, buf, idx, w, acting, c, 1, scale=scale)
 env_id, seed, steps = option("--env", "deep-sea-treasure-v0"), int(option("--seed", "0")), \
     int(option("--steps", "10000"))
 cfg = Config.from_dict({"env_id": env_id, "algo": "mope", "seed": seed, "total_steps": 20000, **overrides})

@@ -348,8 +348,8 @@ def _n_step_agent(**overrides):
 def test_n_step_target_of_one_step_is_eq4():
     agent, batch, w, acting = _n_step_agent(n_step=1)
     args = (agent.q_net, agent.target_net, agent.buffer, batch.indices, w, acting, agent.config)
-    torch.testing.assert_close(targets.n_step_target(*args, 1), agent._envelope_target(batch, w, acting))
-    torch.testing.assert_close(targets.one_step_target(*args), agent._envelope_target(batch, w, acting))
+    torch.testing.assert_close(targets.n_step_target(*args, 1, scale=1.0), agent._envelope_target(batch, w, acting))
+    torch.testing.assert_close(targets.one_step_target(*args, scale=1.0), agent._envelope_target(batch, w, acting))
 
 
 @pytest.mark.parametrize("q_head", ["convex", "conditioned"])  # the fused convex path and the general one

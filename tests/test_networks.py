@@ -311,9 +311,10 @@ def test_the_fast_double_q_target_equals_the_general_envelope_target(monkeypatch
     w = torch.as_tensor(agent.relabel(batch.prefs), dtype=torch.float32)
     acting = torch.as_tensor(batch.prefs, dtype=torch.float32)
     assert targets._one_pass(agent.q_net, c)
-    fast = targets.one_step_target(agent.q_net, agent.target_net, agent.buffer, batch.indices, w, acting, c)
+    fast = targets.one_step_target(agent.q_net, agent.target_net, agent.buffer, batch.indices, w, acting, c, scale=1.0)
     monkeypatch.setattr(targets, "_one_pass", lambda q_net, cfg: False)
-    general = targets.one_step_target(agent.q_net, agent.target_net, agent.buffer, batch.indices, w, acting, c)
+    general = targets.one_step_target(agent.q_net, agent.target_net, agent.buffer, batch.indices, w, acting, c,
+                                      scale=1.0)
     assert fast.shape == general.shape == w.shape
     assert torch.allclose(fast, general, atol=1e-5)
 

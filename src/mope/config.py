@@ -77,7 +77,8 @@ LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0, 
                                 "train_freq": 1, "demos": "", "demo_episodes": 100, "demo_margin": 0.8,
                                 "demo_loss_weight": 1.0, "demo_pretrain_steps": 0,
                                 "demo_batch_share": 0.0, "demo_roll_in": 0, "demo_label_weight": 0.0,
-                                "seen_bound_margin": None, "return_timeout_bootstrap": True}
+                                "seen_bound_margin": None, "return_timeout_bootstrap": True,
+                                "reward_norm": None}
 
 
 def check_preset(name: str) -> str:
@@ -228,6 +229,10 @@ class Config:
 
     # --- EQL core (paper eq. 4; Yang et al. 2019) ------------------------------------------------------------
     gamma: float = 0.99
+    #: Largest per-step reward magnitude the learner sees: where the reward space allows more (any objective),
+    #: every reward is scaled by reward_norm / that bound, all objectives alike (no greedy action changes; values
+    #: are reported in the environment's units; mope.agent.agent.learner_reward_scale). None: off.
+    reward_norm: float | None = None
     #: Q-network head: "conditioned" (the paper: omega is an input, one vector per action and objective) or
     #: "convex" (C return vectors per action; Q(s, a, w) is the one w prefers: mope.agent.networks.ConvexQNetwork).
     q_head: str = "convex"
@@ -511,6 +516,8 @@ def _validate_hyperparameters(self: Config) -> None:
     for name in ("lb_weight", "per_alpha", "mi_alpha", "component_loss_weight", "component_anchor_weight",
                  "demo_margin", "demo_loss_weight", "demo_label_weight"):
         need(_finite(getattr(self, name)) and getattr(self, name) >= 0, name, "must be >= 0")
+    need(self.reward_norm is None or (_finite(self.reward_norm) and self.reward_norm > 0), "reward_norm",
+         "must be > 0 or None")
     need(self.seen_bound_margin is None or (_finite(self.seen_bound_margin) and self.seen_bound_margin >= 0),
          "seen_bound_margin", "must be >= 0 or None")
     need(self.max_grad_norm is None or (_finite(self.max_grad_norm) and self.max_grad_norm > 0),

@@ -106,6 +106,25 @@ def return_bounds(env: gym.Env, gamma: float) -> tuple[np.ndarray, np.ndarray]:
     return np.nan_to_num(q_lo, nan=-np.inf), np.nan_to_num(q_hi, nan=np.inf)
 
 
+def learner_reward_scale(env: gym.Env, reward_scale: float, reward_norm: float | None) -> float:
+    """The factor every reward is multiplied by inside the learner: ``reward_scale``, times ``reward_norm / R``
+    when the largest per-step reward magnitude ``R`` that the environment's ``reward_space`` allows (over all
+    objectives, after ``reward_scale``) exceeds ``reward_norm``.
+
+    One factor for all objectives, so every preference ranks every return as before: no greedy action and no
+    reported value changes meaning (values are reported in the environment's units). An unbounded or missing reward
+    space leaves ``reward_scale`` alone. Deep-Sea-Treasure (``R`` = 23.7) and the robot game (10) are below the
+    default ``reward_norm`` of 25, so their factor is exactly 1; its 124-treasure maps get 25 / 124.
+    """
+    space = getattr(env.unwrapped, "reward_space", None)
+    if reward_norm is None or space is None:
+        return reward_scale
+    bound = float(np.max(np.abs(np.concatenate([np.ravel(space.low), np.ravel(space.high)])))) * reward_scale
+    if not math.isfinite(bound) or bound <= reward_norm:
+        return reward_scale
+    return reward_scale * (reward_norm / bound)
+
+
 def cosine_schedule(start: float, end: float, duration: int, step: int) -> float:
     """Cosine interpolation from ``start`` to ``end`` over ``duration`` steps, then constant."""
     frac = min(1.0, step / max(1, duration))
@@ -326,6 +345,7 @@ class MoPE(BaseAgent):
                                                    fused=True)
 
         self.q_low, self.q_high = return_bounds(self.env, cfg.gamma)
+        self.reward_scale = learner_reward_scale(self.env, cfg.reward_scale, cfg.reward_norm)
         self.set_target_clamp()
         obs_dtype = np.float32 if not isinstance(spec.obs_space, gym.spaces.Discrete) else np.int64
         self.buffer = ReplayBuffer(cfg.buffer_size, self.obs_shape, self.m, cfg.per, obs_dtype)
@@ -413,7 +433,7 @@ class MoPE(BaseAgent):
         self._gradient_step(loss, disc_loss)  # 4, and 5's discriminator step: one Adam step each
         td = losses.preference_interval_td(q.detach(), y, w)                                      # 5: eq. 5
         self._set_priorities(batch, losses.priority(td, bonus, c.mi_alpha, c.per_eps, c.per_alpha))  # 5: eq. 7
-        self.last_losses = update_statistics(loss, parts, td, q.detach(), w, bonus, disc_loss, c.reward_scale)
+        self.last_losses = update_statistics(loss, parts, td, q.detach(), w, bonus, disc_loss, self.reward_scale)
         return self.last_losses
 
     def _eql_loss(self, obs: torch.Tensor, actions: torch.Tensor, w: torch.Tensor, y: torch.Tensor,
@@ -477,9 +497,10 @@ class MoPE(BaseAgent):
         c = self.config
         if c.n_step > 1:
             y = targets.n_step_target(self.q_net, self.target_net, self.buffer, batch.indices, w, acting, c, c.n_step,
-                                      uncut=demo)
+                                      uncut=demo, scale=self.reward_scale)
         else:
-            y = targets.one_step_target(self.q_net, self.target_net, self.buffer, batch.indices, w, acting, c)
+            y = targets.one_step_target(self.q_net, self.target_net, self.buffer, batch.indices, w, acting, c,
+                                        scale=self.reward_scale)
         y = losses.clip_targets(y, self._q_low_t, self._q_high_t) if c.clip_targets or self.bounds_seen else y
         if c.return_mix:
             fresh = self.global_step - self.buffer.return_steps[batch.indices] < c.return_window

@@ -67,6 +67,8 @@ class BaseAgent(AgentState):
     global_step: int
     q_low: np.ndarray
     q_high: np.ndarray
+    #: Every reward's factor in the learner (``reward_scale``, with ``reward_norm``: :func:`learner_reward_scale`).
+    reward_scale: float
     #: ``(2, m)``: the lowest and highest discounted return seen from any state of an ended episode (with
     #: ``seen_bound_margin``; None before the first).
     seen_returns: np.ndarray | None = None
@@ -94,7 +96,7 @@ class BaseAgent(AgentState):
         """Vector Q-values ``(n, |A|, m)`` for a batch, in the environment's units (no input checks; used by
         diagnostics)."""
         q = self.q_net(self._tensor(obs), self._tensor(prefs)).cpu().numpy()
-        return q if self.config.reward_scale == 1.0 else q / self.config.reward_scale
+        return q if self.reward_scale == 1.0 else q / self.reward_scale
 
     @torch.inference_mode()
     def greedy_actions(self, obs: np.ndarray, prefs: np.ndarray) -> np.ndarray:
@@ -204,8 +206,8 @@ class BaseAgent(AgentState):
         high = self.q_high
         if self.bounds_seen and self.seen_returns is not None:
             high = seen_upper_bound(self.q_high, *self.seen_returns, c.seen_bound_margin)
-        self._q_low_t = torch.as_tensor(self.q_low * c.reward_scale, dtype=torch.float32, device=self.device)
-        self._q_high_t = torch.as_tensor(high * c.reward_scale, dtype=torch.float32, device=self.device)
+        self._q_low_t = torch.as_tensor(self.q_low * self.reward_scale, dtype=torch.float32, device=self.device)
+        self._q_high_t = torch.as_tensor(high * self.reward_scale, dtype=torch.float32, device=self.device)
 
     def _expert_labels(self, obs: np.ndarray, prefs: np.ndarray) -> np.ndarray | None:
         """With ``demo_label_weight``, the scripted demonstrators' actions in the states about to be stepped
@@ -242,7 +244,7 @@ class BaseAgent(AgentState):
         q = self.target_net(self._tensor(self.buffer.next_obs[slots]), w)  # (T, A, m)
         best = torch.einsum("tm,tam->ta", w, q).argmax(dim=1)
         values = q[torch.arange(len(slots), device=q.device), best].cpu().numpy()
-        returns = losses.greedy_tail_returns(self.buffer.rewards[slots] * self.config.reward_scale, values,
+        returns = losses.greedy_tail_returns(self.buffer.rewards[slots] * self.reward_scale, values,
                                              np.asarray(episode.greedy, dtype=bool),
                                              terminated or not self.config.return_timeout_bootstrap, self.config.gamma)
         self.buffer.set_returns(slots, returns, self.global_step)

@@ -22,12 +22,13 @@ def _t(x: np.ndarray, device: torch.device, dtype: torch.dtype = torch.float32) 
 
 @torch.no_grad()
 def one_step_target(q_net: nn.Module, target_net: nn.Module, buffer: ReplayBuffer, idx: np.ndarray,
-                    w: torch.Tensor, acting: torch.Tensor, cfg: Config) -> torch.Tensor:
+                    w: torch.Tensor, acting: torch.Tensor, cfg: Config, *, scale: float) -> torch.Tensor:
     """Eq. 4 for transitions ``idx``: one target-network pass over the B x K envelope rows (plus one online pass
-    for double Q). ``(B, N, m)``, in the learner's units (rewards times ``reward_scale``)."""
+    for double Q). ``(B, N, m)``, in the learner's units (rewards times ``scale``, the agent's
+    :attr:`~mope.agent.base.BaseAgent.reward_scale`)."""
     dev = w.device
     next_obs = _t(buffer.next_obs[idx], dev)
-    rewards = _t(buffer.rewards[idx], dev) * cfg.reward_scale
+    rewards = _t(buffer.rewards[idx], dev) * scale
     not_end = 1.0 - _t(buffer.terminated[idx], dev)[:, None, None]
     if _one_pass(q_net, cfg):  # the default: the convex head's double-Q values straight from its components
         feats = q_net.encoder(next_obs)  # the same parameter-free encoder in both networks: encoded once
@@ -44,12 +45,12 @@ def one_step_target(q_net: nn.Module, target_net: nn.Module, buffer: ReplayBuffe
 @torch.no_grad()
 def n_step_target(q_net: nn.Module, target_net: nn.Module, buffer: ReplayBuffer, idx: np.ndarray,
                   w: torch.Tensor, acting: torch.Tensor, cfg: Config, n: int,
-                  uncut: torch.Tensor | None = None) -> torch.Tensor:
+                  uncut: torch.Tensor | None = None, *, scale: float) -> torch.Tensor:
     """Eq. 4's target over ``n`` stored steps, each row cut where its preference's greedy action differs from the
     stored one (:func:`mope.agent.losses.watkins_n_step_targets`). One pass of each network over the ``B x n`` next
     states gives the envelope value after every step and the rows' greedy actions. ``n = 1`` is
     :func:`one_step_target`. Transitions flagged in ``uncut`` (``(B,)``, demonstrations: DQfD's n-step return)
-    are cut only at their episode's end."""
+    are cut only at their episode's end. Rewards are times ``scale``, as in :func:`one_step_target`."""
     dev = w.device
     b, rows, m = w.shape
     slots, valid = buffer.sequences(idx, n)
@@ -63,7 +64,7 @@ def n_step_target(q_net: nn.Module, target_net: nn.Module, buffer: ReplayBuffer,
     if uncut is not None:
         same = same | uncut[:, None, None]
     cont[:, 1:] = _t(valid[:, 1:], dev, torch.bool).unsqueeze(-1) & same
-    rewards = _t(buffer.rewards[slots], dev) * cfg.reward_scale
+    rewards = _t(buffer.rewards[slots], dev) * scale
     return losses.watkins_n_step_targets(rewards, values.view(b, n, rows, m), cont, cfg.gamma)
 
 

@@ -299,6 +299,42 @@ def test_reward_scale_scales_the_targets_and_reports_q_in_the_environments_units
     assert np.isfinite(stats["q_mean"])
 
 
+def test_reward_norm_scales_large_rewards_down_to_it_and_leaves_small_ones_alone():
+    from mope.agent.agent import learner_reward_scale
+
+    dst, mirrored, game = (make_env(e) for e in ("deep-sea-treasure-v0", "deep-sea-treasure-mirrored-v0",
+                                                 "mope/RobotConfrontationDiscrete-v0"))
+    assert learner_reward_scale(dst, 1.0, 25.0) == 1.0  # largest reward 23.7: untouched
+    assert learner_reward_scale(game, 1.0, 25.0) == 1.0  # +-10
+    assert learner_reward_scale(mirrored, 1.0, 25.0) == pytest.approx(25.0 / 124.0)
+    assert learner_reward_scale(dst, 5.0, 25.0) == pytest.approx(25.0 / 23.7)  # after reward_scale
+    assert learner_reward_scale(mirrored, 1.0, None) == 1.0
+    assert learner_reward_scale(mirrored, 0.5, None) == 0.5
+    agent = MoPE("deep-sea-treasure-mirrored-v0", **SMALL, reward_norm=25.0)
+    assert agent.reward_scale == pytest.approx(25.0 / 124.0)
+    assert agent._q_high_t[0].item() == pytest.approx(124.0 / 0.01 * 25.0 / 124.0, rel=1e-5)  # the clamp too
+
+
+def test_reward_norm_makes_the_reward_scale_irrelevant():
+    """Deep-Sea-Treasure with every reward x 4 trains bit for bit as Deep-Sea-Treasure once reward_norm maps its
+    largest reward (94.8) back to 23.7 (a power of two: the factor is exactly 1/4); without it, it does not."""
+    base = {**SMALL, "seed": 2, "reward_norm": float(np.float32(23.7))}  # the reward space's float32 bound
+    ref = MoPE("deep-sea-treasure-v0", **base)
+    scaled = MoPE("deep-sea-treasure-v0", **base, reward_scale=4.0)
+    plain = MoPE("deep-sea-treasure-v0", **{**base, "reward_norm": None}, reward_scale=4.0)
+    for agent in (ref, scaled, plain):
+        agent.train(400)
+    assert scaled.reward_scale == ref.reward_scale == 1.0 and plain.reward_scale == 4.0
+    for a, b in zip(ref.q_net.parameters(), scaled.q_net.parameters(), strict=True):
+        assert torch.equal(a, b)
+    assert any(not torch.equal(a, b) for a, b in zip(ref.q_net.parameters(), plain.q_net.parameters(), strict=True))
+
+
+def test_reward_norm_must_be_positive():
+    with pytest.raises(mope.ConfigError, match="reward_norm=0"):
+        MoPE("deep-sea-treasure-v0", reward_norm=0.0)
+
+
 def test_reward_scale_must_be_positive():
     with pytest.raises(mope.ConfigError, match="reward_scale=-1"):
         MoPE("deep-sea-treasure-v0", reward_scale=-1.0)

@@ -78,7 +78,7 @@ LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0, 
                                 "demo_loss_weight": 1.0, "demo_pretrain_steps": 0,
                                 "demo_batch_share": 0.0, "demo_roll_in": 0, "demo_label_weight": 0.0,
                                 "seen_bound_margin": None, "return_timeout_bootstrap": True,
-                                "reward_norm": None}
+                                "reward_norm": None, "layer_norm": False}
 
 
 def check_preset(name: str) -> str:
@@ -239,6 +239,8 @@ class Config:
     n_components: int = 12  # C, return vectors per action of the convex head
     component_loss_weight: float = 1.0  # of the convex head's component loss (targets train their nearest component)
     hidden_sizes: tuple[int, ...] = (256, 256, 256)
+    #: LayerNorm before every hidden ReLU of the Q-network (mope.agent.networks.mlp).
+    layer_norm: bool = False
     learning_rate: float = 3e-4
     #: Cosine decay of the learning rate to this value over total_steps; None keeps it constant.
     learning_rate_end: float | None = 3e-5

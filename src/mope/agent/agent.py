@@ -325,7 +325,7 @@ class MoPE(BaseAgent):
 
         def q_network() -> nn.Module:
             return make_q_network(spec.obs_space, self.n_actions, self.m, cfg.hidden_sizes, cfg.obs_encoding,
-                                  cfg.q_head, cfg.n_components, cfg.n_critics).to(self.device)
+                                  cfg.q_head, cfg.n_components, cfg.n_critics, cfg.layer_norm).to(self.device)
 
         self.q_net = q_network()
         self.target_net = q_network()

@@ -116,12 +116,14 @@ class ObsEncoder(nn.Module):
         return (obs.reshape(obs.shape[0], -1).float() - self.low) / self.scale
 
 
-def mlp(in_dim: int, hidden: Sequence[int], out_dim: int) -> nn.Sequential:
-    """Fully connected ReLU network ``in_dim -> hidden... -> out_dim``."""
+def mlp(in_dim: int, hidden: Sequence[int], out_dim: int, layer_norm: bool = False) -> nn.Sequential:
+    """Fully connected ReLU network ``in_dim -> hidden... -> out_dim``; with ``layer_norm``, each hidden layer is
+    normalised before its ReLU (Ba et al. 2016), which bounds the output for any input by the last layer's weights
+    (Ball et al. 2023, RLPD: against the overestimation of rarely seen states)."""
     layers: list[nn.Module] = []
     d = in_dim
     for h in hidden:
-        layers += [nn.Linear(d, h), nn.ReLU(inplace=True)]
+        layers += [nn.Linear(d, h)] + ([nn.LayerNorm(h)] if layer_norm else []) + [nn.ReLU(inplace=True)]
         d = h
     layers.append(nn.Linear(d, out_dim))
     return nn.Sequential(*layers)
@@ -138,12 +140,13 @@ class QNetwork(nn.Module):
     """
 
     def __init__(self, obs_space: gym.Space, n_actions: int, n_objectives: int,
-                 hidden: Sequence[int] = (64, 128, 128, 64), obs_encoding: str = "scale") -> None:
+                 hidden: Sequence[int] = (64, 128, 128, 64), obs_encoding: str = "scale", layer_norm: bool = False
+                 ) -> None:
         super().__init__()
         self.encoder = ObsEncoder(obs_space, obs_encoding)
         self.n_actions = n_actions
         self.n_objectives = n_objectives
-        self.net = mlp(self.encoder.out_dim + n_objectives, hidden, n_actions * n_objectives)
+        self.net = mlp(self.encoder.out_dim + n_objectives, hidden, n_actions * n_objectives, layer_norm)
 
     def forward(self, obs: torch.Tensor, pref: torch.Tensor) -> torch.Tensor:
         """Q-values for all actions.
@@ -216,14 +219,14 @@ class ConvexQNetwork(nn.Module):
 
     def __init__(self, obs_space: gym.Space, n_actions: int, n_objectives: int,
                  hidden: Sequence[int] = (256, 256, 256), obs_encoding: str = "scale", n_components: int = 12,
-                 n_critics: int = 1) -> None:
+                 n_critics: int = 1, layer_norm: bool = False) -> None:
         super().__init__()
         self.encoder = ObsEncoder(obs_space, obs_encoding)
         self.n_actions = n_actions
         self.n_objectives = n_objectives
         self.n_components = n_components
         self.n_critics = n_critics
-        self.net = mlp(self.encoder.out_dim, hidden, n_critics * n_actions * n_components * n_objectives)
+        self.net = mlp(self.encoder.out_dim, hidden, n_critics * n_actions * n_components * n_objectives, layer_norm)
 
     def components(self, obs: torch.Tensor, feats: torch.Tensor | None = None) -> torch.Tensor:
         """``(B, H, |A|, C, m)`` the return vectors of every head for raw observations ``(B, ...)``; ``feats``, if
@@ -319,11 +322,12 @@ Q_HEADS = ("conditioned", "convex")
 
 def make_q_network(obs_space: gym.Space, n_actions: int, n_objectives: int, hidden: Sequence[int],
                    obs_encoding: str, head: str = "conditioned", n_components: int = 12,
-                   n_critics: int = 1) -> nn.Module:
+                   n_critics: int = 1, layer_norm: bool = False) -> nn.Module:
     """The Q-network of a config: :class:`QNetwork` (``conditioned``, the paper's) or :class:`ConvexQNetwork`."""
     if head == "convex":
-        return ConvexQNetwork(obs_space, n_actions, n_objectives, hidden, obs_encoding, n_components, n_critics)
-    return QNetwork(obs_space, n_actions, n_objectives, hidden, obs_encoding)
+        return ConvexQNetwork(obs_space, n_actions, n_objectives, hidden, obs_encoding, n_components, n_critics,
+                              layer_norm)
+    return QNetwork(obs_space, n_actions, n_objectives, hidden, obs_encoding, layer_norm)
 
 
 class Discriminator(nn.Module):

@@ -300,10 +300,10 @@ def test_reward_scale_scales_the_targets_and_reports_q_in_the_environments_units
 
 
 def test_reward_norm_scales_large_rewards_down_to_it_and_leaves_small_ones_alone():
-    from mope.agent.agent import learner_reward_scale
+    from mope.agent.agent import largest_reward, learner_reward_scale
 
-    dst, mirrored, game = (make_env(e) for e in ("deep-sea-treasure-v0", "deep-sea-treasure-mirrored-v0",
-                                                 "mope/RobotConfrontationDiscrete-v0"))
+    dst, mirrored, game = (largest_reward(make_env(e)) for e in (
+        "deep-sea-treasure-v0", "deep-sea-treasure-mirrored-v0", "mope/RobotConfrontationDiscrete-v0"))
     assert learner_reward_scale(dst, 1.0, 25.0) == 1.0  # largest reward 23.7: untouched
     assert learner_reward_scale(game, 1.0, 25.0) == 1.0  # +-10
     assert learner_reward_scale(mirrored, 1.0, 25.0) == pytest.approx(25.0 / 124.0)

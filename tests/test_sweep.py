@@ -286,3 +286,28 @@ def test_a_killed_sweep_stops_its_workers_and_resumes(tmp_path: Path) -> None:
     assert (trial / "checkpoints" / "resume.pt").stat().st_mtime > newest_periodic.stat().st_mtime
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
     assert res.returncode == 0 and "resumed" in res.stdout, res.stderr
+
+
+def test_a_run_saved_before_reward_norm_is_reused_where_the_norm_does_not_act(tmp_path: Path) -> None:
+    """A finished run whose config.json predates ``reward_norm`` (read as None) is the same run as today's where
+    the environment's rewards never exceed the norm (Deep-Sea-Treasure: exactly the same factor, 1), so a sweep
+    skips it; on the mirrored map (rewards up to 124) the norm acts, and the old folder is refused."""
+    from mope.agent.agent import without_inert_reward_norm
+
+    spec = parse_spec({"name": "old", "base": {**TINY, "total_steps": 60, "eval_every": 60, "reward_norm": None},
+                       "grid": {"algo": ["eql"]}, "seeds": 1})
+    run_sweep(spec, tmp_path, progress=False)
+    cfg_path = tmp_path / "deep-sea-treasure-v0-eql-s0" / "config.json"
+    saved = json.loads(cfg_path.read_text())
+    del saved["reward_norm"]  # as written before the setting existed
+    cfg_path.write_text(json.dumps(saved))
+    today = apply_overrides(spec, {"reward_norm": 25.0})
+    assert [(r.status, r.action) for r in run_sweep(today, tmp_path, progress=False)] == [("finished", "skipped")]
+
+    mirrored = Config(env_id="deep-sea-treasure-mirrored-v0", reward_norm=25.0).to_dict()
+    before = Config.from_dict({k: v for k, v in mirrored.items() if k != "reward_norm"}).to_dict()
+    assert before["reward_norm"] is None
+    assert without_inert_reward_norm(mirrored)["reward_norm"] == 25.0
+    assert without_inert_reward_norm(before) != without_inert_reward_norm(mirrored)
+    dst = Config(env_id="deep-sea-treasure-v0", reward_norm=25.0).to_dict()
+    assert without_inert_reward_norm(dst)["reward_norm"] is None

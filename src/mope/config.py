@@ -229,9 +229,8 @@ class Config:
 
     # --- EQL core (paper eq. 4; Yang et al. 2019) ------------------------------------------------------------
     gamma: float = 0.99
-    #: Largest per-step reward magnitude the learner sees: where the reward space allows more (any objective),
-    #: every reward is scaled by reward_norm / that bound, all objectives alike (no greedy action changes; values
-    #: are reported in the environment's units; mope.agent.agent.learner_reward_scale). None: off.
+    #: Largest per-step reward the learner sees: where the reward space allows more, all rewards are scaled down to
+    #: it alike (no greedy action changes; mope.agent.agent.learner_reward_scale). None: off.
     reward_norm: float | None = None
     #: Q-network head: "conditioned" (the paper: omega is an input, one vector per action and objective) or
     #: "convex" (C return vectors per action; Q(s, a, w) is the one w prefers: mope.agent.networks.ConvexQNetwork).
@@ -239,8 +238,7 @@ class Config:
     n_components: int = 12  # C, return vectors per action of the convex head
     component_loss_weight: float = 1.0  # of the convex head's component loss (targets train their nearest component)
     hidden_sizes: tuple[int, ...] = (256, 256, 256)
-    #: LayerNorm before every hidden ReLU of the Q-network (mope.agent.networks.mlp).
-    layer_norm: bool = False
+    layer_norm: bool = False  # LayerNorm before every hidden ReLU of the Q-network (mope.agent.networks.mlp)
     learning_rate: float = 3e-4
     #: Cosine decay of the learning rate to this value over total_steps; None keeps it constant.
     learning_rate_end: float | None = 3e-5
@@ -263,15 +261,13 @@ class Config:
     return_mix: float = 0.5
     return_window: int = 2_000
     return_timeout_bootstrap: bool = True
-    #: Stored steps of reward in every target row, each row cut at its own first non-greedy action
-    #: (mope.agent.losses.watkins_n_step_targets; docs/results/n-step). 1: the one-step target of eq. 4.
+    #: Stored rewards per target row, each cut at its first non-greedy action (losses.watkins_n_step_targets); 1: eq. 4.
     n_step: int = 1
     lb_weight: float = 1.0  # of the auxiliary loss: L = L^A + lb_weight * L^B (the paper uses 1)
     #: Homotopy of Yang et al.: the weight of L^B rises linearly from 0 to lb_weight over this many steps (0: off).
     lb_homotopy_steps: int = 0
     max_grad_norm: float | None = 1.0
-    #: Pick (a*, w'*) of the envelope target with the online network, read the value from the target network
-    #: (double Q-learning). Not in the paper; see docs/design.md for why it is on by default.
+    #: Double Q: (a*, w'*) of the envelope target picked by the online network, valued by the target (docs/design.md).
     double_q: bool = True
     #: Clamp the targets y to the returns the reward bounds allow (not in the paper; see docs/design.md), and with
     #: kappa >= 0 the upper clamp to at most the largest return seen plus kappa x the range seen (None: not).
@@ -316,8 +312,7 @@ class Config:
     demos: str = ""
     #: Episodes collected from each scripted policy (a file is used whole).
     demo_episodes: int = 100
-    #: The large margin l(a_E, a) of the supervised loss J_E, and its weight in the loss (0: demonstrations are
-    #: replayed, without the margin loss).
+    #: The large margin l(a_E, a) of J_E, and J_E's weight in the loss (0: replayed, without the margin loss).
     demo_margin: float = 0.8
     demo_loss_weight: float = 1.0
     #: Updates on the demonstrations alone before the first env step.

@@ -106,23 +106,52 @@ def return_bounds(env: gym.Env, gamma: float) -> tuple[np.ndarray, np.ndarray]:
     return np.nan_to_num(q_lo, nan=-np.inf), np.nan_to_num(q_hi, nan=np.inf)
 
 
-def learner_reward_scale(env: gym.Env, reward_scale: float, reward_norm: float | None) -> float:
+def largest_reward(env: gym.Env) -> float:
+    """The largest per-step reward magnitude, over all objectives, that ``env``'s ``reward_space`` allows
+    (infinite when it has none, or an unbounded one)."""
+    space = getattr(env.unwrapped, "reward_space", None)
+    if space is None:
+        return math.inf
+    return float(np.max(np.abs(np.concatenate([np.ravel(space.low), np.ravel(space.high)]))))
+
+
+@functools.lru_cache(maxsize=64)
+def _largest_reward_of(env_id: str) -> float:
+    return largest_reward(make_env(env_id))
+
+
+def learner_reward_scale(largest: float, reward_scale: float, reward_norm: float | None) -> float:
     """The factor every reward is multiplied by inside the learner: ``reward_scale``, times ``reward_norm / R``
     when the largest per-step reward magnitude ``R`` that the environment's ``reward_space`` allows (over all
     objectives, after ``reward_scale``) exceeds ``reward_norm``.
 
-    One factor for all objectives, so every preference ranks every return as before: no greedy action and no
-    reported value changes meaning (values are reported in the environment's units). An unbounded or missing reward
-    space leaves ``reward_scale`` alone. Deep-Sea-Treasure (``R`` = 23.7) and the robot game (10) are below the
-    default ``reward_norm`` of 25, so their factor is exactly 1; its 124-treasure maps get 25 / 124.
+    ``largest`` is :func:`largest_reward` of the environment (before ``reward_scale``). One factor for all
+    objectives, so every preference ranks every return as before: no greedy action and no reported value changes
+    meaning (values are reported in the environment's units). An unbounded or missing reward space leaves
+    ``reward_scale`` alone. Deep-Sea-Treasure (``R`` = 23.7), the robot game (10), resource-gathering, four-room and
+    minecart (1.5 at most) are at or below a ``reward_norm`` of 25, so their factor is exactly 1; the concave and
+    mirrored maps (124) get 25 / 124.
     """
-    space = getattr(env.unwrapped, "reward_space", None)
-    if reward_norm is None or space is None:
+    if reward_norm is None:
         return reward_scale
-    bound = float(np.max(np.abs(np.concatenate([np.ravel(space.low), np.ravel(space.high)])))) * reward_scale
+    bound = largest * reward_scale
     if not math.isfinite(bound) or bound <= reward_norm:
         return reward_scale
     return reward_scale * (reward_norm / bound)
+
+
+def without_inert_reward_norm(config: dict[str, Any]) -> dict[str, Any]:
+    """A saved config's mapping with ``reward_norm`` set to None where it does not act (the environment's rewards
+    never exceed it, so the learner's factor is ``reward_scale`` exactly): such a run is the same run, bit for bit,
+    as one saved before the setting existed (those read None). Finished runs are compared through this."""
+    norm, env_id = config.get("reward_norm"), config.get("env_id")
+    if norm is None or not isinstance(env_id, str):
+        return config
+    try:
+        scale = learner_reward_scale(_largest_reward_of(env_id), float(config.get("reward_scale", 1.0)), float(norm))
+    except (MopeError, TypeError, ValueError):
+        return config
+    return {**config, "reward_norm": None} if scale == config.get("reward_scale", 1.0) else config
 
 
 def cosine_schedule(start: float, end: float, duration: int, step: int) -> float:
@@ -345,7 +374,7 @@ class MoPE(BaseAgent):
                                                    fused=True)
 
         self.q_low, self.q_high = return_bounds(self.env, cfg.gamma)
-        self.reward_scale = learner_reward_scale(self.env, cfg.reward_scale, cfg.reward_norm)
+        self.reward_scale = learner_reward_scale(largest_reward(self.env), cfg.reward_scale, cfg.reward_norm)
         self.set_target_clamp()
         obs_dtype = np.float32 if not isinstance(spec.obs_space, gym.spaces.Discrete) else np.int64
         self.buffer = ReplayBuffer(cfg.buffer_size, self.obs_shape, self.m, cfg.per, obs_dtype)
@@ -495,12 +524,9 @@ class MoPE(BaseAgent):
         demonstrations), clamped to the return bounds and, with ``return_mix``, blended with the behaviour's
         greedy-tail returns (and clamped again, with ``seen_bound_margin``)."""
         c = self.config
-        if c.n_step > 1:
-            y = targets.n_step_target(self.q_net, self.target_net, self.buffer, batch.indices, w, acting, c, c.n_step,
-                                      uncut=demo, scale=self.reward_scale)
-        else:
-            y = targets.one_step_target(self.q_net, self.target_net, self.buffer, batch.indices, w, acting, c,
-                                        scale=self.reward_scale)
+        nets = (self.q_net, self.target_net, self.buffer, batch.indices, w, acting, c)
+        y = targets.n_step_target(*nets, c.n_step, uncut=demo, scale=self.reward_scale) if c.n_step > 1 \
+            else targets.one_step_target(*nets, scale=self.reward_scale)
         y = losses.clip_targets(y, self._q_low_t, self._q_high_t) if c.clip_targets or self.bounds_seen else y
         if c.return_mix:
             fresh = self.global_step - self.buffer.return_steps[batch.indices] < c.return_window

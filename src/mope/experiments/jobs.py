@@ -56,6 +56,7 @@ def check_job_folders(jobs: list[Job], out: Path) -> None:
     Raises:
         JobError: naming the folder and the differing fields with both values.
     """
+    from mope.agent.agent import without_inert_reward_norm
     from mope.config import Config
     from mope.experiments.runs import NON_RESULT_FIELDS
 
@@ -67,7 +68,7 @@ def check_job_folders(jobs: list[Job], out: Path) -> None:
         try:
             saved = json.loads(path.read_text())
             if job.kind == "train":
-                saved, wanted = Config.from_dict(saved).to_dict(), Config.from_dict(job.payload).to_dict()
+                saved, wanted = (without_inert_reward_norm(Config.from_dict(d).to_dict()) for d in (saved, job.payload))
             else:
                 wanted = json.loads(json.dumps({"method": "envelope", **job.payload}))
         except (OSError, json.JSONDecodeError, MopeError):

@@ -116,6 +116,8 @@ def find_runs(runs_dir: str | Path) -> tuple[list[Run], list[str]]:
         raise ReportError(f"runs folder '{root}' is a file; give the folder that holds the runs (or a sweep folder)")
     if not root.is_dir():
         raise ReportError(f"runs folder '{root}' does not exist")
+    from mope.agent.agent import without_inert_reward_norm  # saved before reward_norm existed: the same runs
+
     runs, notes = [], []
     for cfg_path in sorted(root.rglob("config.json")):
         folder = cfg_path.parent
@@ -138,7 +140,7 @@ def find_runs(runs_dir: str | Path) -> tuple[list[Run], list[str]]:
             notes.append(f"left out {rel}: unfinished (last evaluation at step {rows[-1]['step']:.0f} of "
                          f"{config.get('total_steps')})")
             continue
-        runs.append(Run(folder, config, rows))
+        runs.append(Run(folder, without_inert_reward_norm(config), rows))
     if not runs:
         raise ReportError(f"no finished run folders (config.json + metrics.csv) under '{root}'")
     return runs, notes

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from mope.agent.agent import MoPE, TrainingDivergedError, agent_class
+from mope.agent.agent import MoPE, TrainingDivergedError, agent_class, without_inert_reward_norm
 from mope.agent.checkpoint import mope_version
 from mope.agent.runner import Callback, EvalCallback, IntervalStats, ProgressBar, StopWhen, crossed_now, train
 from mope.config import Config
@@ -181,7 +181,7 @@ NON_RESULT_FIELDS = ("device", "torch_threads", "log_every")
 
 def _same_run(saved: Config, wanted: Config) -> list[str]:
     """Fields that change results (not device, threads or log interval) in which two configs differ."""
-    a, b = saved.to_dict(), wanted.to_dict()
+    a, b = without_inert_reward_norm(saved.to_dict()), without_inert_reward_norm(wanted.to_dict())
     return [k for k in a if k not in NON_RESULT_FIELDS and a[k] != b.get(k)]
 
 

@@ -4,6 +4,7 @@ compiled variants, each in a fresh process, alternated over rounds (issue: fast 
 Usage::
 
     .venv/bin/python benchmarks/bench_compile.py [--rounds 3] [--updates 300] [--out benchmarks/results/compile.md]
+    .venv/bin/python benchmarks/bench_compile.py --ops     # where an eager update's time goes, by aten operator
 
 Variants:
 
@@ -51,6 +52,25 @@ print(json.dumps({"update_ms": (time.perf_counter() - t0) / UPDATES * 1e3, "warm
 """
 VARIANTS = ("eager", "target", "target+mlp")
 
+OPS = r"""
+import torch
+from torch.profiler import ProfilerActivity, profile
+torch.set_num_threads(1)
+from mope import make_agent
+agent = make_agent("mope", "deep-sea-treasure-v0", seed=0, eval_every=0, checkpoint_every=0, total_steps=100_000)
+agent.train(1500)
+with profile(activities=[ProfilerActivity.CPU]) as prof:
+    for _ in range(50):
+        agent.update()
+ev = prof.key_averages()
+calls = sum(e.count for e in ev if e.key.startswith("aten::")) / 50
+dense = sum(e.self_cpu_time_total for e in ev if e.key in ("aten::addmm", "aten::mm", "aten::bmm")) / 50
+total = sum(e.self_cpu_time_total for e in ev) / 50
+print(f"aten calls per update: {calls:.0f}; matmuls (addmm, mm, bmm): {dense:.0f} of {total:.0f} us self time")
+for e in sorted(ev, key=lambda e: -e.self_cpu_time_total)[:12]:
+    print(f"  {e.key:50s} {e.count / 50:6.1f} calls {e.self_cpu_time_total / 50:8.1f} us")
+"""
+
 
 def child(variant: str, updates: int) -> dict[str, float]:
     code = CHILD.replace("VARIANT", variant).replace("UPDATES", str(updates))
@@ -64,7 +84,11 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--updates", type=int, default=300)
     parser.add_argument("--out", type=Path, default=None, help="append the table to this markdown file")
+    parser.add_argument("--ops", action="store_true", help="profile 50 eager updates by operator instead")
     args = parser.parse_args()
+    if args.ops:
+        subprocess.run([sys.executable, "-c", OPS], check=True)
+        return
     runs: dict[str, list[dict[str, float]]] = {v: [] for v in VARIANTS}
     for r in range(args.rounds):
         for v in VARIANTS:

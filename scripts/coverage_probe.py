@@ -107,7 +107,7 @@ class ReturnBound(MoPE):
             slots = np.asarray(self._slots)
             self._slots = []
             if self.buffer.terminated[slots[-1]]:
-                r = self.buffer.rewards[slots] * self.config.reward_scale
+                r = self.buffer.rewards[slots] * self.reward_scale  # the learner's factor (reward_norm too)
                 g = np.zeros(self.m, dtype=np.float32)
                 for t in range(len(slots) - 1, -1, -1):
                     g = r[t] + self.config.gamma * g

@@ -291,8 +291,8 @@ def test_eql_loss_reads_the_taken_actions_components_of_every_head(heads):
 def test_reward_scale_scales_the_targets_and_reports_q_in_the_environments_units():
     """An agent learning on rewards x 2 whose networks output 2x another's Q: its targets are exactly 2x the other's
     (the clamp included), while the Q-values it reports and its greedy actions are the other's. (return_mix off:
-    the comparison is of eq. 4's targets; b reads a's buffer.)"""
-    base = {**SMALL, "per": False, "seed": 3, "return_mix": 0.0}
+    the comparison is of eq. 4's targets; b reads a's buffer; reward_norm off: DST x 2 would exceed it.)"""
+    base = {**SMALL, "per": False, "seed": 3, "return_mix": 0.0, "reward_norm": None}
     a, b = MoPE("deep-sea-treasure-v0", **base), MoPE("deep-sea-treasure-v0", **base, reward_scale=2.0)
     a.train(200)
     for net_a, net_b in ((a.q_net, b.q_net), (a.target_net, b.target_net)):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -179,3 +180,21 @@ def test_coverage_over_time_counts_first_cr1_and_the_drop(tmp_path: Path) -> Non
     doc = json.loads((tmp_path / "report" / "report.json").read_text())
     assert doc["groups"][0]["coverage"]["first_cr1"] == [None, None, None, 300]
     assert res.groups[0].label == "eql"
+
+
+def test_runs_saved_before_a_field_existed_group_with_todays(tmp_path: Path) -> None:
+    """A run saved before ``layer_norm`` and ``reward_norm`` existed reads the values it ran with (``migrate``), a
+    norm that does not act on the environment is no difference, and 25 (``--set reward_norm=25``) is 25.0."""
+    write_run(tmp_path / "s0", "mope", 0, FINAL["mope"][0], env_id="deep-sea-treasure-mirrored-v0", reward_norm=25)
+    write_run(tmp_path / "s1", "mope", 1, FINAL["mope"][1], env_id="deep-sea-treasure-mirrored-v0")
+    write_run(tmp_path / "s2", "mope", 2, FINAL["mope"][2], env_id="deep-sea-treasure-mirrored-v0")
+    old = json.loads((tmp_path / "s2" / "config.json").read_text())
+    del old["layer_norm"]  # saved before the field existed
+    (tmp_path / "s2" / "config.json").write_text(json.dumps(old))
+    dst_old, dst_new = tmp_path / "dst" / "s0", tmp_path / "dst" / "s1"
+    write_run(dst_old, "mope", 0, FINAL["mope"][0], reward_norm=None)
+    write_run(dst_new, "mope", 1, FINAL["mope"][1])
+    assert [len(g.runs) for g in report(tmp_path / "dst", plots=False).groups] == [2]  # the norm is inert on DST
+    shutil.rmtree(tmp_path / "dst")
+    res = report(tmp_path, plots=False)
+    assert [len(g.runs) for g in res.groups] == [3]

@@ -117,6 +117,7 @@ def find_runs(runs_dir: str | Path) -> tuple[list[Run], list[str]]:
     if not root.is_dir():
         raise ReportError(f"runs folder '{root}' does not exist")
     from mope.agent.agent import without_inert_reward_norm  # saved before reward_norm existed: the same runs
+    from mope.config import migrate  # a config saved before a field existed reads the value it ran with
 
     runs, notes = [], []
     for cfg_path in sorted(root.rglob("config.json")):
@@ -140,14 +141,28 @@ def find_runs(runs_dir: str | Path) -> tuple[list[Run], list[str]]:
             notes.append(f"left out {rel}: unfinished (last evaluation at step {rows[-1]['step']:.0f} of "
                          f"{config.get('total_steps')})")
             continue
-        runs.append(Run(folder, without_inert_reward_norm(config), rows))
+        runs.append(Run(folder, without_inert_reward_norm(migrate(config)), rows))
     if not runs:
         raise ReportError(f"no finished run folders (config.json + metrics.csv) under '{root}'")
     return runs, notes
 
 
 def _canon(v: Any) -> str:
-    return json.dumps(v, sort_keys=True)
+    """A setting's value as compared between runs: 25 and 25.0 are the same (a float field given an integer by
+    ``--set`` is saved as one; integer fields never hold floats)."""
+    return json.dumps(_as_float(v), sort_keys=True)
+
+
+def _as_float(v: Any) -> Any:
+    if isinstance(v, bool):
+        return v
+    if isinstance(v, int):
+        return float(v)
+    if isinstance(v, (list, tuple)):
+        return [_as_float(x) for x in v]
+    if isinstance(v, dict):
+        return {k: _as_float(x) for k, x in v.items()}
+    return v
 
 
 def _varying(runs: Sequence[Run], ignore: Sequence[str]) -> list[str]:

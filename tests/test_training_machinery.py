@@ -110,6 +110,26 @@ def test_interval_statistics_average_the_updates() -> None:
     assert [r["step"] for r in rows] == [40, 60]  # no update before step 21: nothing to log at step 20
     assert rows[0]["updates"] == 20 and {"loss_a", "loss_b", "td_abs", "q_mean", "q_max"} <= set(rows[0])
 
+def test_interval_statistics_report_the_training_episodes_with_known_answers() -> None:
+    """On Deep-Sea-Treasure every step costs exactly -1 on the time objective and an episode ends only at a treasure
+    or the time limit: the logged return of the time objective is minus the logged length, and the counts add up."""
+    agent = EQL("deep-sea-treasure-v0", **SMALL)
+    rows: list[dict] = []
+    train(agent, 300, IntervalStats(100, rows.append))
+    assert [r["step"] for r in rows] == [100, 200, 300]
+    assert sum(r["episodes"] for r in rows) == agent.episodes > 0
+    for r in rows:
+        assert r["ep_return_1"] == pytest.approx(-r["ep_len"], rel=1e-6)
+        assert 0.0 <= r["ep_end_share"] <= 1.0 and 0.0 <= r["ep_return_0"] <= 23.7
+    assert agent.pop_episode_stats() == {}  # drained by the last row
+    limited = EQL("deep-sea-treasure-v0", **{**SMALL, "max_episode_steps": 1, "epsilon_start": 0.0,
+                                             "epsilon_end": 0.0})
+    train(limited, 100, IntervalStats(100, rows.append))
+    # the first step can reach the 0.7 treasure, else the time limit cuts the episode: ended in a terminal state or not
+    last = rows[-1]
+    assert last["episodes"] == 100 and last["ep_len"] == 1.0
+    assert last["ep_end_share"] == pytest.approx(last["ep_return_0"] / 0.7)
+
 
 @pytest.mark.slow
 def test_interval_statistics_reach_the_run_folder_logs(tmp_path: Path) -> None:
@@ -121,12 +141,15 @@ def test_interval_statistics_reach_the_run_folder_logs(tmp_path: Path) -> None:
     assert [int(r["step"]) for r in rows] == [50, 100, 150, 200, 250, 300]
     assert all(float(r["updates"]) > 0 for r in rows[1:]) and float(rows[-1]["mi_bonus"]) == float(
         rows[-1]["mi_bonus"])  # not NaN for MoPE
+    assert {"episodes", "ep_len", "ep_end_share", "ep_return_0", "ep_return_1"} <= set(rows[0])
+    ended = [r for r in rows if float(r["episodes"]) > 0]  # NaN (False here) where no episode ended
+    assert ended and all(float(r["ep_return_1"]) == pytest.approx(-float(r["ep_len"]), rel=1e-6) for r in ended)
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
     events = EventAccumulator(str(tmp_path / "run" / "tb"))
     events.Reload()
     tags = set(events.Tags()["scalars"])
-    assert {"train/loss_a", "train/td_abs", "train/q_max", "train/mi_bonus", "eval/cr"} <= tags
+    assert {"train/loss_a", "train/td_abs", "train/q_max", "train/mi_bonus", "train/ep_len", "eval/cr"} <= tags
 
 
 # ------------------------------------------------------------------------------------------- locks

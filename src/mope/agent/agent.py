@@ -384,6 +384,7 @@ class MoPE(BaseAgent):
         #: Episodes finished, and started (the next reset's seed is ``seed + episodes_started``).
         self.episodes = 0
         self.episodes_started = 0
+        self.ended_episodes = []
         #: Training wall seconds before the current ``train`` call (carried across resumes), evaluations included.
         self.wall_s = 0.0
         #: Of which evaluating (carried across resumes too).

@@ -118,7 +118,7 @@ class Episode:
         actions: The actions taken so far.
         slots: With ``return_mix``, the buffer slots of its transitions ...
         greedy: ... and which of its actions were greedy.
-        rewards: With ``seen_bound_margin``, its rewards so far.
+        rewards: Its rewards so far.
     """
 
     seed: int
@@ -265,7 +265,7 @@ class AgentState:
             rewards.append(np.asarray(r, dtype=np.float32))
         return Episode(seed, np.asarray(pref, dtype=np.float64), obs, [int(x) for x in actions],
                        [int(x) for x in slots], [bool(x) for x in greedy],
-                       rewards if a.config.seen_bound_margin is not None else [])
+                       rewards)
 
     def __repr__(self) -> str:
         a: Any = self

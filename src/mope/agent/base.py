@@ -72,6 +72,9 @@ class BaseAgent(AgentState):
     #: ``(2, m)``: the lowest and highest discounted return seen from any state of an ended episode (with
     #: ``seen_bound_margin``; None before the first).
     seen_returns: np.ndarray | None = None
+    #: ``(length, terminated, undiscounted return)`` of the training episodes ended since the last
+    #: :meth:`pop_episode_stats` (the training-episode columns of ``train_stats.csv``).
+    ended_episodes: list[tuple[int, bool, np.ndarray]]
     #: Which rows of the latest epsilon-greedy :meth:`act` took a random action.
     _explored: np.ndarray | None = None
     #: The greedy action of each row of the latest :meth:`act` (-1 where it was not computed).
@@ -164,18 +167,32 @@ class BaseAgent(AgentState):
         for i, ep in enumerate(eps):
             ep.obs = next_obs[i] if len(eps) > 1 else steps[i][0]
             ep.actions.append(int(actions[i]))
-            if self.bounds_seen:
-                ep.rewards.append(rewards[i])
+            ep.rewards.append(rewards[i])
             if self.config.return_mix:
                 ep.slots.append(int(slots[i]))
                 ep.greedy.append(bool(greedy[i]))
             if done[i]:
-                if ep.rewards:
-                    self.observe_returns(np.stack(ep.rewards))
+                ep_rewards = np.stack(ep.rewards)
+                if self.bounds_seen:
+                    self.observe_returns(ep_rewards)
+                self.ended_episodes.append((len(ep_rewards), bool(terminated[i]), ep_rewards.sum(axis=0)))
                 if self.config.return_mix:
                     self.store_episode_returns(ep, bool(terminated[i]))
                 self.episodes += 1
                 eps[i] = self._start_episode(i)
+
+    def pop_episode_stats(self) -> dict[str, float]:
+        """Statistics of the training episodes ended since the last call, then forgotten: ``episodes`` (how many),
+        ``ep_len`` (mean length), ``ep_end_share`` (the share that ended in a terminal state, not at the time limit)
+        and ``ep_return_<i>`` (mean undiscounted return of objective ``i``, in the environment's units), as SB3's
+        ``rollout/ep_rew_mean``; empty when none ended."""
+        ended, self.ended_episodes = self.ended_episodes, []
+        if not ended:
+            return {}
+        returns = np.mean([r for _, _, r in ended], axis=0)
+        return {"episodes": float(len(ended)), "ep_len": float(np.mean([n for n, _, _ in ended])),
+                "ep_end_share": float(np.mean([t for _, t, _ in ended])),
+                **{f"ep_return_{i}": float(v) for i, v in enumerate(returns)}}
 
     @property
     def bounds_seen(self) -> bool:

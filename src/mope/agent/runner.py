@@ -231,7 +231,9 @@ class IntervalStats(Callback):
     """Average the update statistics over every ``every`` steps and hand each average to ``sink``.
 
     Each row has ``step``, ``updates`` (how many updates it averages), ``epsilon`` and the mean of every
-    statistic :meth:`~mope.agent.agent.MoPE.update` returns (losses, |TD|, mean and max Q, MI bonus).
+    statistic :meth:`~mope.agent.agent.MoPE.update` returns (losses, |TD|, mean and max Q, MI bonus), and, where
+    training episodes ended in the interval, the agent's ``pop_episode_stats()`` (their count, mean length, share
+    ended in a terminal state and mean return per objective).
     """
 
     def __init__(self, every: int, sink: Callable[[dict[str, float]], None]) -> None:
@@ -246,8 +248,9 @@ class IntervalStats(Callback):
             for k, v in stats.items():
                 self._sums[k] = self._sums.get(k, 0.0) + v
         if crossed_now(agent, self.every) and self._count:
+            episodes = agent.pop_episode_stats() if hasattr(agent, "pop_episode_stats") else {}
             row = {"step": agent.global_step, "updates": self._count, "epsilon": agent.epsilon,
-                   **{k: v / self._count for k, v in self._sums.items()}}
+                   **{k: v / self._count for k, v in self._sums.items()}, **episodes}
             self._sums, self._count = {}, 0
             self.sink(row)
         return True

@@ -9,7 +9,9 @@ A run folder written by :func:`train_run` (and ``mope train``) holds::
                          win_share, loss_share, out_share (episode outcomes where the environment reports them:
                          the confrontation game), train_s (wall_s without the evaluations)
     train_stats.csv      every log_every steps: the mean of each update statistic over those steps (loss,
-                         loss_a, loss_b, td_abs, q_mean, q_max, mi_bonus, disc_loss) and epsilon
+                         loss_a, loss_b, td_abs, q_mean, q_max, mi_bonus, disc_loss), epsilon, and the training
+                         episodes ended in them: episodes, ep_len, ep_end_share (ended in a terminal state, not
+                         at the time limit), ep_return_<i> (mean undiscounted return of objective i)
     solutions.csv        the final evaluation: preference, discounted and undiscounted return per preference
     summary.json         final metrics, wall time, seconds per 1k steps, versions
     tb/                  TensorBoard scalars (metrics and losses)
@@ -57,7 +59,12 @@ METRIC_COLUMNS = ["step", "wall_s", *EVALUATE_KEYS, "timeout_share", *TRUTH_KEYS
 #: Interval averages of the update statistics (``IntervalStats``), every ``log_every`` steps.
 TRAIN_STATS = "train_stats.csv"
 STATS_COLUMNS = ["step", "updates", "epsilon", "loss", "loss_a", "loss_b", "td_abs", "q_mean", "q_max", "mi_bonus",
-                 "disc_loss"]
+                 "disc_loss", "episodes", "ep_len", "ep_end_share"]
+
+
+def stats_columns(n_objectives: int) -> list[str]:
+    """train_stats.csv's columns: :data:`STATS_COLUMNS` and each objective's mean training-episode return."""
+    return [*STATS_COLUMNS, *(f"ep_return_{i}" for i in range(n_objectives))]
 
 
 class RunFolderError(MopeError):
@@ -435,12 +442,12 @@ class _RunLogs:
     """The run folder's logs: metrics.csv (one row per evaluation), train_stats.csv (interval averages of the
     update statistics) and TensorBoard scalars of both."""
 
-    def __init__(self, out: Path, kept: list[dict], kept_stats: list[dict]) -> None:
+    def __init__(self, out: Path, kept: list[dict], kept_stats: list[dict], n_objectives: int) -> None:
         from torch.utils.tensorboard import SummaryWriter
 
         self.tb = SummaryWriter(str(out / "tb"))
         self.metrics = CsvLog(out / "metrics.csv", METRIC_COLUMNS, kept)
-        self.stats = CsvLog(out / TRAIN_STATS, STATS_COLUMNS, kept_stats)
+        self.stats = CsvLog(out / TRAIN_STATS, stats_columns(n_objectives), kept_stats)
 
     def on_record(self, agent: MoPE, rec: dict[str, float]) -> None:
         rec.update(loss=agent.last_losses.get("loss", float("nan")), epsilon=agent.epsilon)
@@ -575,7 +582,7 @@ def _train_logged(agent: MoPE, config: Config, out: Path, kept: list[dict], kept
                   progress: bool, aside: _Aside | None = None) -> list[dict[str, float]]:
     """Train the rest of the run with evaluation, logs, checkpoints and signal handling as callbacks."""
     eval_env = make_env(config.env_id, config.max_episode_steps)
-    logs = _RunLogs(out, kept, kept_stats)
+    logs = _RunLogs(out, kept, kept_stats, agent.m)
     evaluator = Evaluator.from_config(eval_env, config)
     evaluating = EvalCallback(evaluator, config.run.eval_every, on_record=logs.on_record)
     # SIGINT/SIGTERM set a flag that the training loop polls at each step boundary, so the interruption never

@@ -213,6 +213,9 @@ def test_rerun_skips_finished_resumes_interrupted_and_records_failures(local_swe
     assert [t["status"] for t in doc["trials"]] == ["finished", "finished", "failed"]
     assert doc["trials"][2]["error"].startswith("RunFolderError")
 
+    # how often a run saved or logged does not change it: the finished folders are the same runs
+    resaved = apply_overrides(spec, {"checkpoint_every": 7, "log_every": 3})
+    assert [r.action for r in run_sweep(resaved, tmp_path, progress=False)][:2] == ["skipped", "skipped"]
     # a spec changed since: the finished folder of another config is refused before anything runs
     changed = apply_overrides(spec, {"total_steps": 400})
     with pytest.raises(SweepError, match="holds a run of another config: total_steps \\(300 there, 400 now\\)"):

@@ -183,11 +183,13 @@ def _environment_info() -> dict[str, Any]:
 
 
 #: Fields that do not change a run's results; a finished run whose saved config differs only in these is reused.
-NON_RESULT_FIELDS = ("device", "torch_threads", "log_every")
+#: Settings that do not change a run's results: where it ran, and how often it logged and saved (a resumed run equals
+#: an uninterrupted one step for step whatever its checkpoint interval).
+NON_RESULT_FIELDS = ("device", "torch_threads", "log_every", "checkpoint_every")
 
 
 def _same_run(saved: Config, wanted: Config) -> list[str]:
-    """Fields that change results (not device, threads or log interval) in which two configs differ."""
+    """Fields that change results (not :data:`NON_RESULT_FIELDS`) in which two configs differ."""
     a, b = without_inert_reward_norm(saved.to_dict()), without_inert_reward_norm(wanted.to_dict())
     return [k for k in a if k not in NON_RESULT_FIELDS and a[k] != b.get(k)]
 

@@ -340,6 +340,11 @@ def test_one_set_parser_serves_train_and_sweep() -> None:
     # a plain word stays the word: an empty value switches demonstrations off, "yes" is no boolean
     assert parse_set(["demos=", "obs_encoding=yes", "q_head=~"]) == {"demos": "", "obs_encoding": "yes", "q_head": "~"}
     assert Config.from_dict({"env_id": "mope/RobotConfrontationDiscrete-v0", **parse_set(["demos="])}).demos == ""
+    # Python's None is null where a setting takes null, and stays a word elsewhere (then refused by its type check)
+    assert parse_set(["reward_norm=None", "seen_bound_margin=none", "ref_point=None", "demos=None", "gamma=None"]) == {
+        "reward_norm": None, "seen_bound_margin": None, "ref_point": None, "demos": "None", "gamma": "None"}
+    with pytest.raises(ConfigError, match="gamma='None' is not a number"):
+        Config.from_dict(parse_set(["gamma=None"]))
     assert parse_set(["totl_steps=3"]) == {"totl_steps": 3}  # keys are checked by the caller ...
     with pytest.raises(ConfigError, match="totl_steps"):
         parse_set(["totl_steps=3"], check_keys=True)  # ... or here

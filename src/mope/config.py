@@ -658,10 +658,19 @@ def parse_set(items: Sequence[str] | None, check_keys: bool = False,
     return out
 
 
+def _nullable(key: str) -> bool:
+    """Whether the setting ``key`` takes None (its type hint is ``X | None``)."""
+    hints = {**typing.get_type_hints(Config), **typing.get_type_hints(RunSettings)}
+    return type(None) in typing.get_args(hints.get(key))
+
+
 def _parse_value(key: str, raw: str, error: type[ConfigError]) -> Any:
-    """One ``--set`` value: JSON, else YAML, else the string (a list of integers for :data:`_INT_LIST_FIELDS`)."""
+    """One ``--set`` value: JSON, else YAML, else the string (a list of integers for :data:`_INT_LIST_FIELDS`);
+    Python's ``None`` (or ``none``) is null for a setting that takes null, as people type it."""
     import yaml
 
+    if raw.strip() in ("None", "none") and _nullable(key):
+        return None
     try:
         return json.loads(raw)
     except json.JSONDecodeError:

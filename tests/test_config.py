@@ -127,6 +127,8 @@ def test_for_algo_contradiction() -> None:
         ({"return_mix": float("nan")}, "return_mix", "nan"),
         ({"return_window": 0}, "return_window", "0"),
         ({"ref_point": (0.0, float("nan"))}, "ref_point", "nan"),
+        ({"consistent_bellman": True, "n_step": 3}, "consistent_bellman", "True"),
+        ({"consistent_bellman": True, "q_head": "conditioned"}, "consistent_bellman", "True"),
     ],
 )
 def test_out_of_range_raises_config_error_naming_field_and_value(changes: dict, field: str, value: str) -> None:

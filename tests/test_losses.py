@@ -398,3 +398,21 @@ def test_denormals_are_flushed_inside_the_block_and_the_mode_restored() -> None:
         assert denormals_are_flushed()
         assert tiny.mul(1.0)[0] == 0
     assert not denormals_are_flushed() and tiny.mul(1.0)[0] > 0
+
+
+def test_consistent_values_replace_only_the_self_transitions_by_the_taken_actions_value() -> None:
+    """Bellemare et al.'s consistent operator: where s' = s, the value after the step is Q_target(s, a_taken, w) (w's
+    own component of that action); elsewhere the double-Q value stays."""
+    from types import SimpleNamespace
+
+    from mope.agent.targets import consistent_values
+
+    buffer = SimpleNamespace(obs=np.array([[0.0, 1.0], [0.0, 1.0]]), next_obs=np.array([[0.0, 1.0], [1.0, 1.0]]),
+                             actions=np.array([1, 0]))
+    v_target = torch.tensor([[[[9.0, 9.0], [9.0, 9.0]], [[2.0, 0.0], [0.0, 3.0]]],  # row 0: action 1 has (2, 0), (0, 3)
+                             [[[5.0, 5.0], [5.0, 5.0]], [[5.0, 5.0], [5.0, 5.0]]]])
+    w = torch.tensor([[[1.0, 0.0], [0.0, 1.0]], [[1.0, 0.0], [0.0, 1.0]]])
+    values = torch.full((2, 2, 2), 7.0)  # what double Q gave (the greedy action's values)
+    out = consistent_values(values, v_target, buffer, np.array([0, 1]), w)
+    assert torch.equal(out[0], torch.tensor([[2.0, 0.0], [0.0, 3.0]]))  # each preference's component of action 1
+    assert torch.equal(out[1], values[1]) and torch.equal(values, torch.full((2, 2, 2), 7.0))  # moved, not in place

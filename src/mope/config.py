@@ -80,7 +80,7 @@ LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0, 
                                 "demo_loss_weight": 1.0, "demo_pretrain_steps": 0,
                                 "demo_batch_share": 0.0, "demo_roll_in": 0, "demo_label_weight": 0.0,
                                 "seen_bound_margin": None, "return_timeout_bootstrap": True,
-                                "reward_norm": None, "layer_norm": False}
+                                "reward_norm": None, "layer_norm": False, "consistent_bellman": False}
 
 
 def check_preset(name: str) -> str:
@@ -257,9 +257,9 @@ class Config:
     target_update_freq: int = 100
     #: Polyak averaging of the target network at every step with this weight; None: the hard copy above.
     target_tau: float | None = 0.005
-    #: Weight of the episode's greedy-tail return in its own preference's target row (0: off; greedy_tail_returns in
-    #: mope.agent.losses, docs/results/return-mix), from returns at most return_window steps old. A tail the time limit
-    #: cut ends on the target network's value of s_T, or with return_timeout_bootstrap=False there (return-timeouts).
+    #: Weight of the episode's greedy-tail return (losses.greedy_tail_returns, docs/results/return-mix) in its own
+    #: preference's target row (0: off), from returns at most return_window steps old; a tail the time limit cut ends on
+    #: V(s_T), or there with return_timeout_bootstrap=False.
     return_mix: float = 0.5
     return_window: int = 2_000
     return_timeout_bootstrap: bool = True
@@ -278,8 +278,8 @@ class Config:
     epsilon_start: float = 1.0
     epsilon_end: float = 0.05
     epsilon_decay_steps: int = 10_000
-    #: Preferences per sampled transition (N_omega). EQL draws them uniformly from the simplex, shared by
-    #: the batch (Yang et al.'s ``weight_num``); EE draws them within ``sigma_omega`` of the transition's own.
+    #: Preferences per sampled transition (N_omega): EQL's uniform on the simplex, shared by the batch (Yang et al.'s
+    #: ``weight_num``); EE's within ``sigma_omega`` of the transition's own.
     n_omega: int = 32
 
     # --- prioritized replay (Schaul et al. 2016) ------------------------------------------------------------
@@ -294,9 +294,8 @@ class Config:
     #: Share of a transition's N_omega relabeled preferences drawn uniformly from the whole simplex instead of
     #: within sigma_omega (EE only; 0 is the paper's similar-preference relabeling).
     relabel_broad: float = 0.5
-    #: Preference set the envelope max runs over: the transition's own relabeled set ("relabel"),
-    #: the acting preferences of the whole batch ("batch"), or both; "own" switches the envelope off (each row maxes
-    #: over actions at its own preference only: an ablation, like morl-baselines' ``envelope=False``).
+    #: The envelope max's preferences: the transition's relabeled set ("relabel"), the batch's acting ones ("batch"),
+    #: or both; "own" is no envelope (each row at its own preference, as morl-baselines' ``envelope=False``).
     envelope_prefs: str = "own"
     mi_alpha: float = 0.1  # weight alpha of the mutual-information term in the priority (eq. 7)
     disc_hidden: tuple[int, ...] = (64, 64)
@@ -305,8 +304,7 @@ class Config:
     # --- preference exploration (PE) ---------------------------------------------------------------------------
     preference_exploration: bool = True
     n_intervals: int = 10
-    #: The constant in p(omega) ~ (N_i + c)^(-1/2); the paper uses 0.01.
-    pe_count_offset: float = 0.01
+    pe_count_offset: float = 0.01  # the constant c in p(omega) ~ (N_i + c)^(-1/2); the paper uses 0.01
 
     # --- demonstrations (DQfD, Hester et al. 2018; mope.agent.demonstrations) ---------------------------------
     #: "" (none), "scripted" (the env's scripted policies, each at the preferences it is good at), or an .npz file
@@ -333,6 +331,8 @@ class Config:
     component_anchor_weight: float = 0.0
     #: Rewards times this constant in the targets (all objectives alike: no greedy action changes); 1: off.
     reward_scale: float = 1.0
+    #: Bellemare et al.'s consistent operator where s' = s (targets.consistent_values; convex head, one step only).
+    consistent_bellman: bool = False
 
     run: RunSettings = field(default_factory=RunSettings)
 
@@ -519,6 +519,9 @@ def _validate_hyperparameters(self: Config) -> None:
          "must be > 0 or None")
     need(self.seen_bound_margin is None or (_finite(self.seen_bound_margin) and self.seen_bound_margin >= 0),
          "seen_bound_margin", "must be >= 0 or None")
+    need(not self.consistent_bellman or (self.q_head == "convex" and self.n_critics == 1 and self.double_q
+                                         and self.envelope_prefs == "own" and self.n_step == 1), "consistent_bellman",
+         "needs the convex head's one-step target (q_head=convex, n_critics=1, double_q, envelope_prefs=own, n_step=1)")
     need(self.max_grad_norm is None or (_finite(self.max_grad_norm) and self.max_grad_norm > 0),
          "max_grad_norm", "must be > 0 or None")
     for name in ("epsilon_start", "epsilon_end", "per_beta_start", "relabel_broad", "return_mix", "demo_batch_share"):

@@ -32,8 +32,10 @@ def one_step_target(q_net: nn.Module, target_net: nn.Module, buffer: ReplayBuffe
     not_end = 1.0 - _t(buffer.terminated[idx], dev)[:, None, None]
     if _one_pass(q_net, cfg):  # the default: the convex head's double-Q values straight from its components
         feats = q_net.encoder(next_obs)  # the same parameter-free encoder in both networks: encoded once
-        values, _ = ConvexQNetwork.double_q_values(q_net.components(next_obs, feats)[:, 0],
-                                                   target_net.components(next_obs, feats)[:, 0], w)
+        v_target = target_net.components(next_obs, feats)[:, 0]
+        values, _ = ConvexQNetwork.double_q_values(q_net.components(next_obs, feats)[:, 0], v_target, w)
+        if cfg.consistent_bellman:
+            values = consistent_values(values, v_target, buffer, idx, w)
         return rewards.unsqueeze(1) + cfg.gamma * not_end * values
     env_prefs, envelope = losses.envelope_set(cfg.envelope_prefs, w, acting)
     q_next = target_net.forward_prefs(next_obs, env_prefs)
@@ -66,6 +68,27 @@ def n_step_target(q_net: nn.Module, target_net: nn.Module, buffer: ReplayBuffer,
     cont[:, 1:] = _t(valid[:, 1:], dev, torch.bool).unsqueeze(-1) & same
     rewards = _t(buffer.rewards[slots], dev) * scale
     return losses.watkins_n_step_targets(rewards, values.view(b, n, rows, m), cont, cfg.gamma)
+
+
+def consistent_values(values: torch.Tensor, v_target: torch.Tensor, buffer: ReplayBuffer, idx: np.ndarray,
+                      w: torch.Tensor) -> torch.Tensor:
+    """The consistent Bellman operator (Bellemare et al. 2016, "Increasing the action gap", eq. 7): where a transition
+    left the state as it was (``s' = s``), the value after it is the target network's ``Q(s, a, w)`` of the action
+    taken, not the greedy action's. A self-loop's value then settles at ``r / (1 - gamma)``, the return of repeating
+    it, instead of sinking from the state's best value by 1 % per bootstrap (not in the paper).
+
+    ``values`` ``(B, N, m)`` (the double-Q values of :func:`one_step_target`), ``v_target`` ``(B, A, C, m)`` the
+    target network's components at ``s'``; returns ``values`` with the self-transitions' rows replaced."""
+    b = len(idx)
+    stay = np.flatnonzero(np.all(buffer.obs[idx].reshape(b, -1) == buffer.next_obs[idx].reshape(b, -1), axis=1))
+    if len(stay) == 0:
+        return values
+    rows = torch.as_tensor(stay, device=values.device)
+    taken = v_target[rows, _t(buffer.actions[idx][stay], values.device, torch.int64)]  # (S, C, m)
+    best = torch.einsum("scm,snm->scn", taken, w[rows]).argmax(dim=1)  # (S, N): w's component of that action
+    out = values.clone()
+    out[rows] = taken.gather(1, best.unsqueeze(-1).expand(-1, -1, taken.shape[-1]))
+    return out
 
 
 def _one_pass(q_net: nn.Module, cfg: Config) -> bool:

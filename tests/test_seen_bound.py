@@ -50,7 +50,7 @@ def test_the_clamp_follows_the_returns_of_ended_episodes():
 def test_off_by_default_and_the_clamp_is_the_reward_spaces():
     a = MoPE("deep-sea-treasure-v0", Config.for_algo("mope", **SMALL))
     a.train(300)
-    assert a.seen_returns is None and all(not ep.rewards for ep in a._episodes)
+    assert a.seen_returns is None and a.episodes > 0  # episodes ended, and none tightened the clamp
     np.testing.assert_allclose(a._q_high_t.numpy(), a.q_high)
 
 

@@ -519,8 +519,7 @@ def _validate_hyperparameters(self: Config) -> None:
          "must be > 0 or None")
     need(self.seen_bound_margin is None or (_finite(self.seen_bound_margin) and self.seen_bound_margin >= 0),
          "seen_bound_margin", "must be >= 0 or None")
-    need(not self.consistent_bellman or (self.q_head == "convex" and self.n_critics == 1 and self.double_q
-                                         and self.envelope_prefs == "own" and self.n_step == 1), "consistent_bellman",
+    need(not self.consistent_bellman or (one_pass_target(self) and self.n_step == 1), "consistent_bellman",
          "needs the convex head's one-step target (q_head=convex, n_critics=1, double_q, envelope_prefs=own, n_step=1)")
     need(self.max_grad_norm is None or (_finite(self.max_grad_norm) and self.max_grad_norm > 0),
          "max_grad_norm", "must be > 0 or None")
@@ -659,6 +658,12 @@ def parse_set(items: Sequence[str] | None, check_keys: bool = False,
             raise unknown_key_error(key)
         out[key] = _parse_value(key, raw, error)
     return out
+
+
+def one_pass_target(cfg: Config) -> bool:
+    """Whether eq. 4's target takes the convex head's fast path (``ConvexQNetwork.double_q_values``): one head,
+    double Q, no envelope over other preferences (the defaults)."""
+    return cfg.q_head == "convex" and cfg.n_critics == 1 and cfg.double_q and cfg.envelope_prefs == "own"
 
 
 def _nullable(key: str) -> bool:

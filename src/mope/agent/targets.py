@@ -13,7 +13,7 @@ from torch import nn
 from mope.agent import losses
 from mope.agent.networks import ConvexQNetwork
 from mope.agent.replay import ReplayBuffer
-from mope.config import Config
+from mope.config import Config, one_pass_target
 
 
 def _t(x: np.ndarray, device: torch.device, dtype: torch.dtype = torch.float32) -> torch.Tensor:
@@ -92,9 +92,8 @@ def consistent_values(values: torch.Tensor, v_target: torch.Tensor, buffer: Repl
 
 
 def _one_pass(q_net: nn.Module, cfg: Config) -> bool:
-    """Whether eq. 4's target takes the convex head's fast path (:meth:`ConvexQNetwork.double_q_values`): one head,
-    double Q, no envelope (the defaults)."""
-    return isinstance(q_net, ConvexQNetwork) and q_net.n_critics == 1 and cfg.double_q and cfg.envelope_prefs == "own"
+    """:func:`mope.config.one_pass_target`, for a network that is the convex head it describes."""
+    return isinstance(q_net, ConvexQNetwork) and one_pass_target(cfg)
 
 
 def values_after(q_net: nn.Module, target_net: nn.Module, next_obs: torch.Tensor, w: torch.Tensor,

@@ -182,9 +182,9 @@ def _environment_info() -> dict[str, Any]:
             "python": platform.python_version(), "machine": platform.machine(), "cpus": os.cpu_count()}
 
 
-#: Fields that do not change a run's results; a finished run whose saved config differs only in these is reused.
 #: Settings that do not change a run's results: where it ran, and how often it logged and saved (a resumed run equals
-#: an uninterrupted one step for step whatever its checkpoint interval).
+#: an uninterrupted one step for step whatever its checkpoint interval). A finished run whose saved config differs
+#: only in these is reused.
 NON_RESULT_FIELDS = ("device", "torch_threads", "log_every", "checkpoint_every")
 
 

@@ -56,9 +56,8 @@ def check_job_folders(jobs: list[Job], out: Path) -> None:
     Raises:
         JobError: naming the folder and the differing fields with both values.
     """
-    from mope.agent.agent import without_inert_reward_norm
     from mope.config import Config
-    from mope.experiments.runs import NON_RESULT_FIELDS
+    from mope.experiments.runs import NON_RESULT_FIELDS, result_differences
 
     for job in jobs:
         name = {"train": "config.json", "envelope": "peer.json"}.get(job.kind)
@@ -68,12 +67,13 @@ def check_job_folders(jobs: list[Job], out: Path) -> None:
         try:
             saved = json.loads(path.read_text())
             if job.kind == "train":
-                saved, wanted = (without_inert_reward_norm(Config.from_dict(d).to_dict()) for d in (saved, job.payload))
+                saved, wanted = (Config.from_dict(d).to_dict() for d in (saved, job.payload))
+                differ = result_differences(saved, wanted)
             else:
                 wanted = json.loads(json.dumps({"method": "envelope", **job.payload}))
+                differ = [k for k in wanted if k not in NON_RESULT_FIELDS and saved.get(k) != wanted[k]]
         except (OSError, json.JSONDecodeError, MopeError):
             continue  # an unreadable config belongs to a run that never got going; it is started afresh
-        differ = [k for k in wanted if k not in NON_RESULT_FIELDS and saved.get(k) != wanted[k]]
         if differ:
             what = ", ".join(f"{k} ({saved.get(k)!r} there, {wanted[k]!r} now)" for k in differ[:4])
             raise JobError(f"folder '{out / job.name}' holds a run of another config: {what}; "

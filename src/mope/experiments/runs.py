@@ -188,10 +188,17 @@ def _environment_info() -> dict[str, Any]:
 NON_RESULT_FIELDS = ("device", "torch_threads", "log_every", "checkpoint_every")
 
 
+def result_differences(saved: dict[str, Any], wanted: dict[str, Any]) -> list[str]:
+    """Fields that change results (not :data:`NON_RESULT_FIELDS`) in which two configs' dicts differ, in
+    ``wanted``'s order; a ``reward_norm`` that cannot act on the run's environment is not a difference
+    (:func:`~mope.agent.agent.without_inert_reward_norm`). The one test of "the same run" for resuming a folder
+    and for a batch's job folders (:func:`mope.experiments.jobs.check_job_folders`)."""
+    a, b = without_inert_reward_norm(saved), without_inert_reward_norm(wanted)
+    return [k for k in b if k not in NON_RESULT_FIELDS and a.get(k) != b[k]]
+
+
 def _same_run(saved: Config, wanted: Config) -> list[str]:
-    """Fields that change results (not :data:`NON_RESULT_FIELDS`) in which two configs differ."""
-    a, b = without_inert_reward_norm(saved.to_dict()), without_inert_reward_norm(wanted.to_dict())
-    return [k for k in a if k not in NON_RESULT_FIELDS and a[k] != b.get(k)]
+    return result_differences(saved.to_dict(), wanted.to_dict())
 
 
 def _finished_result(out: Path) -> RunResult:

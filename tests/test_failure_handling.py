@@ -460,6 +460,12 @@ def test_stale_checkpoint_temporaries_are_removed_and_stats_keep_their_types(tmp
     with open(out / "train_stats.csv") as f:
         rows = list(csv.DictReader(f))
     assert rows[-1]["step"] == "90" and all(r["step"].isdigit() and r["updates"].isdigit() for r in rows)
+    # the interval cut by the signal is two rows (41-45 before it, 46-50 after the resume): no update is lost
+    with open(ref / "train_stats.csv") as f:
+        ref_rows = list(csv.DictReader(f))
+    updates = {int(r["step"]): int(r["updates"]) for r in rows}
+    assert updates[45] + updates[50] == {int(r["step"]): int(r["updates"]) for r in ref_rows}[50]
+    assert sum(updates.values()) == sum(int(r["updates"]) for r in ref_rows)
 
 
 # --------------------------------------------------------------------------------------------- warnings

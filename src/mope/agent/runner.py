@@ -247,13 +247,20 @@ class IntervalStats(Callback):
             self._count += 1
             for k, v in stats.items():
                 self._sums[k] = self._sums.get(k, 0.0) + v
-        if crossed_now(agent, self.every) and self._count:
-            episodes = agent.pop_episode_stats() if hasattr(agent, "pop_episode_stats") else {}
-            row = {"step": agent.global_step, "updates": self._count, "epsilon": agent.epsilon,
-                   **{k: v / self._count for k, v in self._sums.items()}, **episodes}
-            self._sums, self._count = {}, 0
-            self.sink(row)
+        if crossed_now(agent, self.every):
+            self.flush(agent)
         return True
+
+    def flush(self, agent: Agent) -> None:
+        """Hand the interval so far to the sink now (a run stopped between two rows: its last row averages the
+        ``updates`` made since the previous one, and the resumed run's next row the rest)."""
+        if not self._count:
+            return
+        episodes = agent.pop_episode_stats() if hasattr(agent, "pop_episode_stats") else {}
+        row = {"step": agent.global_step, "updates": self._count, "epsilon": agent.epsilon,
+               **{k: v / self._count for k, v in self._sums.items()}, **episodes}
+        self._sums, self._count = {}, 0
+        self.sink(row)
 
 
 def train_with_evaluation(agent: Agent, total_timesteps: int | None = None, eval_env: gym.Env | None = None,

@@ -601,8 +601,9 @@ def _train_logged(agent: MoPE, config: Config, out: Path, kept: list[dict], kept
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGINT, signal.SIGTERM):
             handlers[sig] = signal.signal(sig, lambda signum, frame: received.append(signum))
-    callbacks: list[Callback] = [evaluating, _Checkpoints(out, config.run.checkpoint_every, aside),
-                                 IntervalStats(config.run.log_every, logs.on_stats), StopWhen(lambda: bool(received))]
+    interval = IntervalStats(config.run.log_every, logs.on_stats)
+    callbacks: list[Callback] = [evaluating, _Checkpoints(out, config.run.checkpoint_every, aside), interval,
+                                 StopWhen(lambda: bool(received))]
     if progress:
         callbacks.insert(0, ProgressBar(evaluating))
     remaining = config.total_steps - agent.global_step
@@ -610,6 +611,8 @@ def _train_logged(agent: MoPE, config: Config, out: Path, kept: list[dict], kept
         try:
             if remaining > 0:
                 train(agent, remaining, callbacks)
+                if received:  # stopped between two rows: the part of the interval made so far is a row of its own
+                    interval.flush(agent)
             elif kept and kept[-1]["step"] == agent.global_step:  # resumed at the last step, evaluated already:
                 _, agent.last_solutions = evaluator.evaluate(agent)  # once more for the final solutions
             else:  # stopped on the last step before its evaluation: make (and log) it now

@@ -128,6 +128,8 @@ def test_for_algo_contradiction() -> None:
         ({"return_window": 0}, "return_window", "0"),
         ({"ref_point": (0.0, float("nan"))}, "ref_point", "nan"),
         ({"consistent_bellman": True, "n_step": 3}, "consistent_bellman", "True"),
+        ({"target_tau_end": 0.0}, "target_tau_end", "0.0"),
+        ({"target_tau": None, "target_tau_end": 0.001}, "target_tau_end", "0.001"),
         ({"consistent_bellman": True, "q_head": "conditioned"}, "consistent_bellman", "True"),
     ],
 )

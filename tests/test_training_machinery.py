@@ -80,6 +80,25 @@ def test_collect_step_acts_through_act_and_update_returns_its_statistics(monkeyp
     assert all(np.isfinite(v) for v in stats.values())
 
 
+def test_target_tau_end_anneals_the_polyak_weight_on_the_cosine() -> None:
+    import torch
+
+    from mope.agent.agent import polyak_weight
+
+    agent = MoPE("deep-sea-treasure-v0", Config.for_algo("mope", **SMALL, total_steps=100, target_tau=0.01,
+                                                         target_tau_end=0.001))
+    taus = [polyak_weight(agent.config, step) for step in (0, 50, 100, 200)]
+    assert taus == pytest.approx([0.01, 0.0055, 0.001, 0.001])
+    with torch.no_grad():  # one Polyak step at step 50 moves the target 0.0055 of the way to the online weights
+        for p in agent.target_net.parameters():
+            p.zero_()
+    agent.global_step = 50
+    agent._polyak()
+    online, target = next(agent.q_net.parameters()), next(agent.target_net.parameters())
+    assert torch.allclose(target, 0.0055 * online)
+    assert polyak_weight(Config.for_algo("mope", **SMALL, total_steps=100), 100) == 0.005
+
+
 def test_one_callback_object_sees_every_step_and_can_stop() -> None:
     agent = EQL("deep-sea-treasure-v0", **SMALL)
 

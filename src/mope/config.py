@@ -80,7 +80,8 @@ LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0, 
                                 "demo_loss_weight": 1.0, "demo_pretrain_steps": 0,
                                 "demo_batch_share": 0.0, "demo_roll_in": 0, "demo_label_weight": 0.0,
                                 "seen_bound_margin": None, "return_timeout_bootstrap": True,
-                                "reward_norm": None, "layer_norm": False, "consistent_bellman": False}
+                                "reward_norm": None, "layer_norm": False, "consistent_bellman": False,
+                                "target_tau_end": None}
 
 
 def check_preset(name: str) -> str:
@@ -242,8 +243,7 @@ class Config:
     hidden_sizes: tuple[int, ...] = (256, 256, 256)
     layer_norm: bool = False  # LayerNorm before every hidden ReLU of the Q-network (mope.agent.networks.mlp)
     learning_rate: float = 3e-4
-    #: Cosine decay of the learning rate to this value over total_steps; None keeps it constant.
-    learning_rate_end: float | None = 3e-5
+    learning_rate_end: float | None = 3e-5  # cosine decay of the learning rate to it over total_steps (None: constant)
     batch_size: int = 128
     buffer_size: int = 20_000
     learning_starts: int = 200
@@ -255,16 +255,17 @@ class Config:
     gradient_steps: int = 1
     #: Hard target-network copy every this many environment steps (Yang et al. use 100).
     target_update_freq: int = 100
-    #: Polyak averaging of the target network at every step with this weight; None: the hard copy above.
+    #: Polyak weight of the target network at every step (None: the hard copy above), on the learning rate's cosine
+    #: to target_tau_end (None: constant; docs/results/target-tau).
     target_tau: float | None = 0.005
+    target_tau_end: float | None = None
     #: Weight of the episode's greedy-tail return (losses.greedy_tail_returns, docs/results/return-mix) in its own
     #: preference's target row (0: off), from returns at most return_window steps old; a tail the time limit cut ends on
     #: V(s_T), or there with return_timeout_bootstrap=False.
     return_mix: float = 0.5
     return_window: int = 2_000
     return_timeout_bootstrap: bool = True
-    #: Stored rewards per target row, each cut at its first non-greedy action (losses.watkins_n_step_targets); 1: eq. 4.
-    n_step: int = 1
+    n_step: int = 1  # stored rewards per target row, cut at its first non-greedy action (watkins_n_step_targets)
     lb_weight: float = 1.0  # of the auxiliary loss: L = L^A + lb_weight * L^B (the paper uses 1)
     #: Homotopy of Yang et al.: the weight of L^B rises linearly from 0 to lb_weight over this many steps (0: off).
     lb_homotopy_steps: int = 0
@@ -491,8 +492,11 @@ def _validate_hyperparameters(self: Config) -> None:
     need(self.q_head in Q_HEADS, "q_head", f"choose one of {', '.join(Q_HEADS)}")
     need(self.learning_rate_end is None or (_finite(self.learning_rate_end) and self.learning_rate_end > 0),
          "learning_rate_end", "must be > 0 or None")
-    need(self.target_tau is None or (_finite(self.target_tau) and 0 < self.target_tau <= 1), "target_tau",
-         "must lie in (0, 1] or be None")
+    for name in ("target_tau", "target_tau_end"):
+        tau = getattr(self, name)
+        need(tau is None or (_finite(tau) and 0 < tau <= 1), name, "must lie in (0, 1] or be None")
+    need(self.target_tau_end is None or self.target_tau is not None, "target_tau_end",
+         "anneals target_tau: set it to None with the hard target copy (target_tau None)")
     need(self.max_episode_steps is None or self.max_episode_steps >= 1, "max_episode_steps",
          "must be >= 1 or None")
     need(_finite(self.gamma) and 0.0 < self.gamma <= 1.0, "gamma", "must lie in (0, 1]")

@@ -154,6 +154,14 @@ def without_inert_reward_norm(config: dict[str, Any]) -> dict[str, Any]:
     return {**config, "reward_norm": None} if scale == config.get("reward_scale", 1.0) else config
 
 
+def polyak_weight(config: Config, step: int) -> float | None:
+    """The target network's Polyak weight at ``step``: ``target_tau``, or annealed to ``target_tau_end`` on the
+    learning rate's cosine (None: the hard copy)."""
+    if config.target_tau is None or config.target_tau_end is None:
+        return config.target_tau
+    return cosine_schedule(config.target_tau, config.target_tau_end, config.total_steps, step)
+
+
 def cosine_schedule(start: float, end: float, duration: int, step: int) -> float:
     """Cosine interpolation from ``start`` to ``end`` over ``duration`` steps, then constant."""
     frac = min(1.0, step / max(1, duration))
@@ -424,9 +432,10 @@ class MoPE(BaseAgent):
         return stats
 
     def _polyak(self) -> None:
-        if self.config.target_tau is not None:
+        tau = polyak_weight(self.config, self.global_step)
+        if tau is not None:
             with torch.no_grad():
-                torch._foreach_lerp_(self._target_params, self._q_params, self.config.target_tau)
+                torch._foreach_lerp_(self._target_params, self._q_params, tau)
 
     def end_step(self) -> None:
         """Housekeeping after a collection step: the hard target-network copy (every ``target_update_freq`` env

@@ -129,7 +129,7 @@ def test_for_algo_contradiction() -> None:
         ({"ref_point": (0.0, float("nan"))}, "ref_point", "nan"),
         ({"consistent_bellman": True, "n_step": 3}, "consistent_bellman", "True"),
         ({"target_tau_end": 0.0}, "target_tau_end", "0.0"),
-        ({"target_tau": None, "target_tau_end": 0.001}, "target_tau_end", "0.001"),
+        ({"target_tau_end": float("nan")}, "target_tau_end", "nan"),
         ({"consistent_bellman": True, "q_head": "conditioned"}, "consistent_bellman", "True"),
     ],
 )

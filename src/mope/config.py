@@ -256,9 +256,9 @@ class Config:
     #: Hard target-network copy every this many environment steps (Yang et al. use 100).
     target_update_freq: int = 100
     #: Polyak weight of the target network at every step (None: the hard copy above), on the learning rate's cosine
-    #: to target_tau_end (None: constant; docs/results/target-tau).
+    #: to target_tau_end (None: constant; unused with the hard copy; docs/results/target-tau).
     target_tau: float | None = 0.005
-    target_tau_end: float | None = None
+    target_tau_end: float | None = 1e-4
     #: Weight of the episode's greedy-tail return (losses.greedy_tail_returns, docs/results/return-mix) in its own
     #: preference's target row (0: off), from returns at most return_window steps old; a tail the time limit cut ends on
     #: V(s_T), or there with return_timeout_bootstrap=False.
@@ -495,8 +495,6 @@ def _validate_hyperparameters(self: Config) -> None:
     for name in ("target_tau", "target_tau_end"):
         tau = getattr(self, name)
         need(tau is None or (_finite(tau) and 0 < tau <= 1), name, "must lie in (0, 1] or be None")
-    need(self.target_tau_end is None or self.target_tau is not None, "target_tau_end",
-         "anneals target_tau: set it to None with the hard target copy (target_tau None)")
     need(self.max_episode_steps is None or self.max_episode_steps >= 1, "max_episode_steps",
          "must be >= 1 or None")
     need(_finite(self.gamma) and 0.0 < self.gamma <= 1.0, "gamma", "must lie in (0, 1]")

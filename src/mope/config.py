@@ -258,7 +258,7 @@ class Config:
     #: Polyak weight of the target network at every step (None: the hard copy above), on the learning rate's cosine
     #: to target_tau_end (None: constant; unused with the hard copy; docs/results/target-tau).
     target_tau: float | None = 0.005
-    target_tau_end: float | None = 1e-4
+    target_tau_end: float | None = None
     #: Weight of the episode's greedy-tail return (losses.greedy_tail_returns, docs/results/return-mix) in its own
     #: preference's target row (0: off), from returns at most return_window steps old; a tail the time limit cut ends on
     #: V(s_T), or there with return_timeout_bootstrap=False.

@@ -7,9 +7,10 @@ step on (docs/results/target-tau/README.md):
     python scripts/fork_probe.py prep --seed 13 --step 13000 --out runs/fork      # runs/fork/resume-s13-13000.pt
     python scripts/fork_probe.py run runs/fork/resume-s13-13000.pt '{"target_tau": 0.001}' --eval-every 2000
 
-``prep`` trains mope's defaults (``--set KEY=VALUE`` for others) with ``total_steps`` 20k, so every schedule is the
-full run's; ``run`` loads the state with the changes (any config field) and trains to 20k, printing CR /
-time-out share at each evaluation and the largest Q of a batch (``q_max``, environment units).
+``prep`` trains mope's defaults (``--set KEY=VALUE``, repeated, for others) with ``total_steps`` 20k, so every
+schedule is the full run's, and prints the largest Q of a batch so far; ``run`` loads the state with the changes
+(any config field) and trains to 20k, printing CR / time-out share at each evaluation and the largest Q of a
+batch after the fork (``q_max``, environment units).
 """
 from __future__ import annotations
 
@@ -53,11 +54,11 @@ def main() -> None:
     if args.cmd == "prep":
         sets = parse_overrides(args.set)
         config = Config.for_algo("mope", **{"env_id": args.env, "seed": args.seed, "total_steps": 20_000, **sets})
-        agent = MoPE(args.env, config)
-        agent.train(args.step)
+        agent, largest = MoPE(args.env, config), LargestQ()
+        agent.train(args.step, callback=largest)
         path = Path(args.out) / f"resume-s{args.seed}-{args.step}.pt"
         agent.save(path, include_buffer=True)
-        print(f"saved {path} at step {agent.global_step}")
+        print(f"saved {path} at step {agent.global_step}; largest q_max so far {largest.value:.1f}")
         return
     changes = json.loads(args.changes)
     agent = MoPE.load(args.state, **changes)

@@ -130,6 +130,7 @@ def test_for_algo_contradiction() -> None:
         ({"consistent_bellman": True, "n_step": 3}, "consistent_bellman", "True"),
         ({"target_tau_end": 0.0}, "target_tau_end", "0.0"),
         ({"target_tau_end": float("nan")}, "target_tau_end", "nan"),
+        ({"target_tau_anneal_from": 1.0}, "target_tau_anneal_from", "1.0"),
         ({"consistent_bellman": True, "q_head": "conditioned"}, "consistent_bellman", "True"),
     ],
 )

@@ -81,7 +81,7 @@ LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0, 
                                 "demo_batch_share": 0.0, "demo_roll_in": 0, "demo_label_weight": 0.0,
                                 "seen_bound_margin": None, "return_timeout_bootstrap": True,
                                 "reward_norm": None, "layer_norm": False, "consistent_bellman": False,
-                                "target_tau_end": None}
+                                "target_tau_end": None, "target_tau_anneal_from": 0.0}
 
 
 def check_preset(name: str) -> str:
@@ -255,10 +255,11 @@ class Config:
     gradient_steps: int = 1
     #: Hard target-network copy every this many environment steps (Yang et al. use 100).
     target_update_freq: int = 100
-    #: Polyak weight of the target network at every step (None: the hard copy above), on the learning rate's cosine
-    #: to target_tau_end (None: constant; unused with the hard copy; docs/results/target-tau).
+    #: Polyak weight of the target network at every step (None: the hard copy above), annealed on a cosine to
+    #: target_tau_end (None: constant) from the fraction target_tau_anneal_from of the run (docs/results/target-tau).
     target_tau: float | None = 0.005
     target_tau_end: float | None = None
+    target_tau_anneal_from: float = 0.0
     #: Weight of the episode's greedy-tail return (losses.greedy_tail_returns, docs/results/return-mix) in its own
     #: preference's target row (0: off), from returns at most return_window steps old; a tail the time limit cut ends on
     #: V(s_T), or there with return_timeout_bootstrap=False.
@@ -279,8 +280,7 @@ class Config:
     epsilon_start: float = 1.0
     epsilon_end: float = 0.05
     epsilon_decay_steps: int = 10_000
-    #: Preferences per sampled transition (N_omega): EQL's uniform on the simplex, shared by the batch (Yang et al.'s
-    #: ``weight_num``); EE's within ``sigma_omega`` of the transition's own.
+    #: Preferences per transition (N_omega): EQL's uniform, shared by the batch (Yang's ``weight_num``); EE's near it.
     n_omega: int = 32
 
     # --- prioritized replay (Schaul et al. 2016) ------------------------------------------------------------
@@ -495,6 +495,8 @@ def _validate_hyperparameters(self: Config) -> None:
     for name in ("target_tau", "target_tau_end"):
         tau = getattr(self, name)
         need(tau is None or (_finite(tau) and 0 < tau <= 1), name, "must lie in (0, 1] or be None")
+    need(_finite(self.target_tau_anneal_from) and 0 <= self.target_tau_anneal_from < 1, "target_tau_anneal_from",
+         "must lie in [0, 1)")
     need(self.max_episode_steps is None or self.max_episode_steps >= 1, "max_episode_steps",
          "must be >= 1 or None")
     need(_finite(self.gamma) and 0.0 < self.gamma <= 1.0, "gamma", "must lie in (0, 1]")

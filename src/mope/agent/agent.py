@@ -155,11 +155,13 @@ def without_inert_reward_norm(config: dict[str, Any]) -> dict[str, Any]:
 
 
 def polyak_weight(config: Config, step: int) -> float | None:
-    """The target network's Polyak weight at ``step``: ``target_tau``, or annealed to ``target_tau_end`` on the
-    learning rate's cosine (None: the hard copy)."""
+    """The target network's Polyak weight at ``step``: ``target_tau``, or annealed to ``target_tau_end`` on a
+    cosine that starts at the fraction ``target_tau_anneal_from`` of the run and ends with it (None: the hard copy).
+    """
     if config.target_tau is None or config.target_tau_end is None:
         return config.target_tau
-    return cosine_schedule(config.target_tau, config.target_tau_end, config.total_steps, step)
+    start = round(config.target_tau_anneal_from * config.total_steps)
+    return cosine_schedule(config.target_tau, config.target_tau_end, config.total_steps - start, max(0, step - start))
 
 
 def cosine_schedule(start: float, end: float, duration: int, step: int) -> float:

@@ -100,6 +100,7 @@ def test_target_tau_end_anneals_the_polyak_weight_on_the_cosine() -> None:
     late = Config.for_algo("mope", **SMALL, total_steps=100, target_tau=0.01, target_tau_end=0.001,
                            target_tau_anneal_from=0.5)  # constant over the first half, the cosine over the second
     assert [polyak_weight(late, step) for step in (0, 50, 75, 100)] == pytest.approx([0.01, 0.01, 0.0055, 0.001])
+    assert all(polyak_weight(late, step) == 0.01 for step in range(51))  # exactly: the constant weight's run
 
 
 def test_one_callback_object_sees_every_step_and_can_stop() -> None:

@@ -161,6 +161,8 @@ def polyak_weight(config: Config, step: int) -> float | None:
     if config.target_tau is None or config.target_tau_end is None:
         return config.target_tau
     start = round(config.target_tau_anneal_from * config.total_steps)
+    if step <= start:  # exactly target_tau, so a run is the constant weight's bit for bit up to here
+        return config.target_tau
     return cosine_schedule(config.target_tau, config.target_tau_end, config.total_steps - start, max(0, step - start))
 
 

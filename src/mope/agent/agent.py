@@ -163,7 +163,7 @@ def polyak_weight(config: Config, step: int) -> float | None:
     start = round(config.target_tau_anneal_from * config.total_steps)
     if step <= start:  # exactly target_tau, so a run is the constant weight's bit for bit up to here
         return config.target_tau
-    return cosine_schedule(config.target_tau, config.target_tau_end, config.total_steps - start, max(0, step - start))
+    return cosine_schedule(config.target_tau, config.target_tau_end, config.total_steps - start, step - start)
 
 
 def cosine_schedule(start: float, end: float, duration: int, step: int) -> float:

@@ -8,6 +8,15 @@ Usage::
 Each probe line (JSON): step, wall seconds of training so far, outcome rates at w_catch in {1, 0.9, 0.8, 0.7,
 0.5, 0.3, 0} over 100 common starts (greedy play), and the mean discounted EU over 21 preferences beside the
 reference policies' upper envelope (:mod:`mope.evaluation.game_probe`). The final weights go beside it (``.pt``).
+
+Forking an arm (two arms that differ only after a step share their run up to it)::
+
+    ... --seed 0 --save-state-at 100000 --out A-s0.jsonl       # also writes A-s0.100000.pt (the whole state)
+    ... --seed 0 --resume A-s0.100000.pt --set target_tau_end=0.0001 --out B-s0.jsonl
+
+``--resume`` loads the whole training state (weights, optimizers, replay buffer, episodes in progress, RNGs) with
+``--set`` as changes and continues to ``--steps``; its first line is the resumed state's own probe, so the file
+holds the same steps as a fresh arm's.
 """
 
 from __future__ import annotations
@@ -20,6 +29,7 @@ from pathlib import Path
 import torch
 
 from mope import make_agent
+from mope.agent.agent import MoPE
 from mope.config import parse_overrides
 from mope.envs import confrontation as C
 from mope.evaluation.game_probe import probe
@@ -31,18 +41,28 @@ parser.add_argument("--seed", type=int, default=0)
 parser.add_argument("--algo", default="mope")
 parser.add_argument("--set", nargs="*", default=[])
 parser.add_argument("--out", required=True)
+parser.add_argument("--save-state-at", type=int, default=None, help="also save the whole state after this probe")
+parser.add_argument("--resume", default=None, help="continue a state saved by --save-state-at (--set: changes)")
 args = parser.parse_args()
 
 torch.set_num_threads(1)
 overrides = parse_overrides(args.set)
-agent = make_agent(args.algo, C.DISCRETE_ID, seed=args.seed, total_steps=args.steps, **overrides)
+if args.resume:
+    agent = MoPE.load(args.resume, **overrides)
+    assert agent.config.total_steps == args.steps, "--steps must be the saved run's budget (its schedules use it)"
+    first = agent.global_step
+else:
+    agent = make_agent(args.algo, C.DISCRETE_ID, seed=args.seed, total_steps=args.steps, **overrides)
+    first = None
 out = Path(args.out)
 out.parent.mkdir(parents=True, exist_ok=True)
 train_s = 0.0
 with out.open("w") as f:
-    while agent.global_step < args.steps:
+    while agent.global_step < args.steps or first is not None:
         t0 = time.perf_counter()
-        agent.train(min(args.every, args.steps - agent.global_step))
+        if first is None:
+            agent.train(min(args.every, args.steps - agent.global_step))
+        first = None
         train_s += time.perf_counter() - t0
         res = probe(agent)
         line = {"step": agent.global_step, "train_s": round(train_s, 1), "algo": args.algo, "seed": args.seed,
@@ -54,4 +74,6 @@ with out.open("w") as f:
               + "/".join(f"{r[w]['win']:.2f}" for w in (1.0, 0.9, 0.8, 0.7))
               + " out@.5/.3/0 " + "/".join(f"{r[w]['out']:.2f}" for w in (0.5, 0.3, 0.0))
               + f" EU {res['eu']:.3f} (refs {res['eu_references']:.3f})", flush=True)
+        if agent.global_step == args.save_state_at:
+            agent.save(out.with_suffix(f".{args.save_state_at}.pt"), include_buffer=True)
 agent.save(out.with_suffix(".pt"))  # the final weights, for later probes (not committed: a few MB)

@@ -44,12 +44,17 @@ parser.add_argument("--out", required=True)
 parser.add_argument("--save-state-at", type=int, default=None, help="also save the whole state after this probe")
 parser.add_argument("--resume", default=None, help="continue a state saved by --save-state-at (--set: changes)")
 args = parser.parse_args()
+if args.save_state_at is not None and (args.save_state_at % args.every or not 0 < args.save_state_at <= args.steps):
+    parser.error(f"--save-state-at {args.save_state_at} must be a probe step: a multiple of --every {args.every} "
+                 f"in (0, --steps {args.steps}]")
 
 torch.set_num_threads(1)
 overrides = parse_overrides(args.set)
 if args.resume:
     agent = MoPE.load(args.resume, **overrides)
-    assert agent.config.total_steps == args.steps, "--steps must be the saved run's budget (its schedules use it)"
+    if agent.config.total_steps != args.steps:
+        parser.error(f"--steps {args.steps} must be the saved run's budget, {agent.config.total_steps} (its "
+                     "schedules use it)")
     first = agent.global_step
 else:
     agent = make_agent(args.algo, C.DISCRETE_ID, seed=args.seed, total_steps=args.steps, **overrides)

@@ -55,30 +55,35 @@ if args.resume:
     if agent.config.total_steps != args.steps:
         parser.error(f"--steps {args.steps} must be the saved run's budget, {agent.config.total_steps} (its "
                      "schedules use it)")
-    first = agent.global_step
 else:
     agent = make_agent(args.algo, C.DISCRETE_ID, seed=args.seed, total_steps=args.steps, **overrides)
-    first = None
 out = Path(args.out)
 out.parent.mkdir(parents=True, exist_ok=True)
+
+
+def record(f: object, train_s: float) -> None:
+    """Probe the agent, write its line, print a summary, and save the whole state at ``--save-state-at``."""
+    res = probe(agent)
+    line = {"step": agent.global_step, "train_s": round(train_s, 1), "algo": args.algo, "seed": args.seed,
+            "set": args.set, **res}
+    f.write(json.dumps(line) + "\n")
+    f.flush()
+    r = res["rates"]
+    print(f"step {agent.global_step} {train_s:.0f}s win@1/.9/.8/.7 "
+          + "/".join(f"{r[w]['win']:.2f}" for w in (1.0, 0.9, 0.8, 0.7))
+          + " out@.5/.3/0 " + "/".join(f"{r[w]['out']:.2f}" for w in (0.5, 0.3, 0.0))
+          + f" EU {res['eu']:.3f} (refs {res['eu_references']:.3f})", flush=True)
+    if agent.global_step == args.save_state_at:
+        agent.save(out.with_suffix(f".{args.save_state_at}.pt"), include_buffer=True)
+
+
 train_s = 0.0
 with out.open("w") as f:
-    while agent.global_step < args.steps or first is not None:
+    if args.resume:  # the resumed state's own probe first, so the file holds the same steps as a fresh arm's
+        record(f, train_s)
+    while agent.global_step < args.steps:
         t0 = time.perf_counter()
-        if first is None:
-            agent.train(min(args.every, args.steps - agent.global_step))
-        first = None
+        agent.train(min(args.every, args.steps - agent.global_step))
         train_s += time.perf_counter() - t0
-        res = probe(agent)
-        line = {"step": agent.global_step, "train_s": round(train_s, 1), "algo": args.algo, "seed": args.seed,
-                "set": args.set, **res}
-        f.write(json.dumps(line) + "\n")
-        f.flush()
-        r = res["rates"]
-        print(f"step {agent.global_step} {train_s:.0f}s win@1/.9/.8/.7 "
-              + "/".join(f"{r[w]['win']:.2f}" for w in (1.0, 0.9, 0.8, 0.7))
-              + " out@.5/.3/0 " + "/".join(f"{r[w]['out']:.2f}" for w in (0.5, 0.3, 0.0))
-              + f" EU {res['eu']:.3f} (refs {res['eu_references']:.3f})", flush=True)
-        if agent.global_step == args.save_state_at:
-            agent.save(out.with_suffix(f".{args.save_state_at}.pt"), include_buffer=True)
+        record(f, train_s)
 agent.save(out.with_suffix(".pt"))  # the final weights, for later probes (not committed: a few MB)

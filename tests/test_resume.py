@@ -70,6 +70,26 @@ def test_agent_save_load_mid_episode_continues_identically(tmp_path, extra):
         np.testing.assert_array_equal(ref.buffer.returns, b.buffer.returns)
 
 
+def test_the_game_with_demonstrations_continues_identically_after_save_and_load(tmp_path):
+    """The robot game's recipe (4 envs, scripted demonstrations, pre-training) resumed from a whole-state checkpoint
+    is the uninterrupted run bit for bit: what ``scripts/game_study.py --resume`` forks arms on."""
+    from mope import make_agent
+    from mope.envs import confrontation as C
+
+    kw = {"seed": 3, "total_steps": 800, "demo_episodes": 2, "demo_pretrain_steps": 20, "learning_starts": 100,
+          "buffer_size": 2_000, "hidden_sizes": [32, 32]}
+    ref = make_agent("mope", C.DISCRETE_ID, **kw)
+    ref.train(800)
+    a = make_agent("mope", C.DISCRETE_ID, **kw)
+    a.train(400)
+    a.save(tmp_path / "mid.pt", include_buffer=True)
+    b = MoPE.load(tmp_path / "mid.pt")
+    b.train(800 - b.global_step)
+    assert b.global_step == ref.global_step == 800
+    for p_ref, p_b in zip(ref.q_net.parameters(), b.q_net.parameters(), strict=True):
+        assert np.array_equal(p_ref.detach().numpy(), p_b.detach().numpy())
+
+
 def test_train_run_resume_bookkeeping(tmp_path):
     cfg = Config.for_algo("eql", **SMALL)
     out = tmp_path / "run"

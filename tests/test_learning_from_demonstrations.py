@@ -129,12 +129,17 @@ def treasure_demonstrations(per_treasure: int = 4, gamma: float = 0.99):
 
 @pytest.mark.slow
 def test_a_short_training_with_demonstrations_beats_one_without(tmp_path) -> None:
-    """Deep-Sea-Treasure, 3k steps, seeds 0-1: demonstrations of each treasure's path (in its preference band)
-    lift the share of preferences at their optimum over the same training without them, and do not lower the CR.
-    Measured on seeds 0-2 (Intel Xeon) before commit 289b02d: optimal share 0.74 / 0.76 / 0.66 against 0.59 /
-    0.53 / 0.54, CR 0.95 / 0.84 / 0.90 against 0.78 / 0.71 / 0.78. Since 289b02d (the same values, gradients summed
-    in another order): seeds 0-1 share lifted by at least 0.08, CR 0.81 against 0.79 (mean); seed 2 share 0.54
-    against 0.59, CR 0.95 against 0.67."""
+    """Deep-Sea-Treasure, 3k steps, seeds 0-4: demonstrations of each treasure's path (in its preference band)
+    lift the mean share of preferences at their optimum over the same training without them, and do not lower the
+    mean CR. About 4-5 minutes on one core.
+
+    Per seed the lift is noisy, and training streams differ across machines, so the test asserts a five-seed mean
+    with a margin. Measured on an AMD EPYC (2026-12-06, this test's stream): share lifts 0.14 / 0.01 / 0.25 / 0.16 /
+    0.01 on seeds 0-4 (mean 0.115; seed 5: 0.14), CR 0.885 against 0.785. On the Intel Xeon seeds 0-1 lifted the
+    share by 0.08 on average and seed 2 by -0.05. At 1.5k steps the demonstrations lift the CR but not yet the
+    share (six seeds, AMD). A learner that never reads them trains the same stream in both arms and fails the test;
+    one whose demonstrations change the stream but not what it learns would pass it about one time in five (a lift
+    of 0 with a per-seed spread of about 0.1)."""
     from mope.evaluation.evaluator import Evaluator
 
     path = save_demonstrations(tmp_path / "treasures.npz", treasure_demonstrations())
@@ -142,13 +147,13 @@ def test_a_short_training_with_demonstrations_beats_one_without(tmp_path) -> Non
     share, cr = {}, {}
     for demos in (str(path), ""):
         results = []
-        for seed in (0, 1):
+        for seed in range(5):
             agent = MoPE("deep-sea-treasure-v0", seed=seed, demos=demos)
             agent.train(3_000)
             results.append(ev.evaluate(agent)[0])
         share[demos] = np.mean([r["optimal_share"] for r in results])
         cr[demos] = np.mean([r["cr"] for r in results])
-    assert share[str(path)] >= share[""] + 0.08, share
+    assert share[str(path)] >= share[""] + 0.04, share
     assert cr[str(path)] >= cr[""], cr
 
 

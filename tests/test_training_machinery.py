@@ -427,9 +427,10 @@ def test_benchmark_mope_bound_is_the_defaults_with_the_seen_return_bound(tmp_pat
 
 
 def test_benchmark_late_methods_are_the_defaults_with_the_late_target_anneal(tmp_path: Path) -> None:
-    """``mope-late`` and ``eql-late`` differ from ``mope`` and ``eql`` by the two target-anneal fields only, and
-    their runs are found by name beside the defaults'."""
-    from mope.paper.benchmark import benchmark_jobs, finished_runs
+    """``mope-late`` and ``eql-late`` differ from ``mope`` and ``eql`` by the two target-anneal fields only
+    (``mope-late-bound`` by those and the seen-return bound), and their runs are found by name beside the
+    defaults'."""
+    from mope.paper.benchmark import LATE_TARGET, benchmark_jobs, finished_runs
 
     jobs = benchmark_jobs(["resource-gathering-v0"], ["mope", "mope-late", "eql", "eql-late"], [1], quick=False,
                           steps=None)
@@ -438,6 +439,9 @@ def test_benchmark_late_methods_are_the_defaults_with_the_late_target_anneal(tmp
         late, base = by_name[f"resource-gathering-v0-{algo}-late-s1"], by_name[f"resource-gathering-v0-{algo}-s1"]
         assert {k for k in late if late[k] != base[k]} == {"target_tau_end", "target_tau_anneal_from"}
         assert (late["target_tau_end"], late["target_tau_anneal_from"]) == (1e-4, 0.5)
+    both = benchmark_jobs(["four-room-v0"], ["mope-late-bound", "mope"], [0], quick=False, steps=None)
+    combined, base = (j.payload for j in both)
+    assert {k: combined[k] for k in combined if combined[k] != base[k]} == {**LATE_TARGET, "seen_bound_margin": 0.1}
     out = tmp_path / "bench"
     _fake_bench_run(out, "resource-gathering-v0", "eql-late", 1, 50_000, 0.5)
     assert [j.name for j in finished_runs(out)] == ["resource-gathering-v0-eql-late-s1"]

@@ -8,7 +8,7 @@ per environment.
 Methods: ``mope`` and ``eql`` (the defaults), ``mope-paper`` and ``eql-paper`` (the paper preset), ``mope-bound``
 (the defaults with the seen-return bound, ``seen_bound_margin=0.1``: a candidate default, not one yet), ``mope-late``
 and ``eql-late`` (the defaults with the target network slowed over the run's second half,
-``target_tau_end=1e-4, target_tau_anneal_from=0.5``: a candidate default), and
+``target_tau_end=1e-4, target_tau_anneal_from=0.5``: a candidate default), ``mope-late-bound`` (both), and
 ``envelope`` (morl-baselines' Envelope at its example's settings, :data:`mope.paper.envelope.ENVELOPE_EXAMPLE`;
 needs the optional ``bench`` extra). Environments and their evaluation settings and budgets: :data:`BENCH_ENVS`.
 
@@ -93,7 +93,9 @@ METHODS: dict[str, dict[str, Any]] = {"mope": {"algo": "mope"}, "eql": {"algo": 
                                       "eql-paper": {"algo": "eql", "preset": "paper"},
                                       "mope-bound": {"algo": "mope", "seen_bound_margin": 0.1},
                                       "mope-late": {"algo": "mope", **LATE_TARGET},
-                                      "eql-late": {"algo": "eql", **LATE_TARGET}, "envelope": {}}
+                                      "eql-late": {"algo": "eql", **LATE_TARGET},
+                                      "mope-late-bound": {"algo": "mope", **LATE_TARGET, "seen_bound_margin": 0.1},
+                                      "envelope": {}}
 DEFAULT_METHODS = ("mope", "eql", "mope-paper", "envelope")
 
 

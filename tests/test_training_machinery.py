@@ -447,3 +447,20 @@ def test_benchmark_late_methods_are_the_defaults_with_the_late_target_anneal(tmp
     out = tmp_path / "bench"
     _fake_bench_run(out, "resource-gathering-v0", "eql-late", 1, 50_000, 0.5)
     assert [j.name for j in finished_runs(out)] == ["resource-gathering-v0-eql-late-s1"]
+
+
+def test_the_cpu_description_names_the_kernels_torch_dispatches_to() -> None:
+    """Streams differ between CPUs that share a name (an AMD EPYC with and one without AVX-512), so a run's summary and
+    a benchmark piece record the family, the model and torch's kernel level, not the name alone."""
+    import platform
+
+    import torch
+
+    from mope.experiments.runs import _environment_info, cpu_description
+    from mope.paper.benchmark import _machine
+
+    text = cpu_description()
+    assert text.endswith(f"{torch.backends.cpu.get_cpu_capability()} kernels)"), text
+    if platform.system() == "Linux":
+        assert "family " in text and ", model " in text, text
+    assert _environment_info()["cpu"] == text and _machine(1.0, "x")["machine"].startswith(text)

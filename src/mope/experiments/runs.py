@@ -177,9 +177,33 @@ def read_metrics(run_dir: str | Path) -> list[dict[str, float]]:
     return _read_numeric_csv(path)
 
 
+def cpu_description() -> str:
+    """The CPU as runs depend on it: its name, family and model (Linux), and the vector kernels torch dispatches to.
+
+    Runs are deterministic on one machine but not across machines: two hosts that both call themselves "AMD EPYC"
+    can differ in generation and in the kernels torch picks (AVX2 or AVX512), and then in every training stream.
+    """
+    name, ids = platform.processor() or platform.machine(), {}
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                key, _, value = line.partition(":")
+                key = key.strip()
+                if key in ("model name", "cpu family", "model") and key not in ids:
+                    ids[key] = value.strip()
+                if not line.strip() and ids:
+                    break
+    except OSError:
+        pass
+    name = ids.get("model name", name)
+    family = f"family {ids['cpu family']}, model {ids['model']}; " if "cpu family" in ids and "model" in ids else ""
+    return f"{name} ({family}{torch.backends.cpu.get_cpu_capability()} kernels)"
+
+
 def _environment_info() -> dict[str, Any]:
     return {"mope": mope_version(), "torch": torch.__version__, "numpy": np.__version__,
-            "python": platform.python_version(), "machine": platform.machine(), "cpus": os.cpu_count()}
+            "python": platform.python_version(), "machine": platform.machine(), "cpu": cpu_description(),
+            "cpus": os.cpu_count()}
 
 
 #: Settings that do not change a run's results: where it ran, and how often it logged and saved (a resumed run equals

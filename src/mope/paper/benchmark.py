@@ -495,13 +495,9 @@ def _machine(wall_s: float, command: str) -> dict[str, Any]:
     import os
     import platform
 
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as f:
-            cpu = next((ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name")), cpu)
-    except OSError:
-        pass
-    return {"machine": f"{cpu}, {os.cpu_count()} CPUs, Python {platform.python_version()}",
+    from mope.experiments.runs import cpu_description
+
+    return {"machine": f"{cpu_description()}, {os.cpu_count()} CPUs, Python {platform.python_version()}",
             "date": datetime.date.today().isoformat(), "wall_s": wall_s, "command": command, "code": _code_version()}
 
 

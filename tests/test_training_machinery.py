@@ -450,8 +450,9 @@ def test_benchmark_late_methods_are_the_defaults_with_the_late_target_anneal(tmp
 
 
 def test_the_cpu_description_names_the_kernels_torch_dispatches_to() -> None:
-    """Streams differ between CPUs that share a name (an AMD EPYC with and one without AVX-512), so a run's summary and
-    a benchmark piece record the family, the model and torch's kernel level, not the name alone."""
+    """Streams differ between hosts that share a CPU name (two "AMD EPYC" hosts trained different Deep-Sea-Treasure
+    streams), so a run's summary and a benchmark piece record the family, the model and torch's kernel level, not the
+    name alone."""
     import platform
 
     import torch

@@ -6,9 +6,9 @@ own; a re-run keeps the finished jobs and resumes the interrupted ones), then wr
 per environment.
 
 Methods: ``mope`` and ``eql`` (the defaults), ``mope-paper`` and ``eql-paper`` (the paper preset), ``mope-bound``
-(the defaults with the seen-return bound, ``seen_bound_margin=0.1``: a candidate default, not one yet), ``mope-late``
-and ``eql-late`` (the defaults with the target network slowed over the run's second half,
-``target_tau_end=1e-4, target_tau_anneal_from=0.5``: a candidate default), ``mope-late-bound`` (both), and
+(the defaults with the seen-return bound, ``seen_bound_margin=0.1``: a candidate default, not one yet),
+``mope-const``, ``eql-const`` and ``mope-const-bound`` (the same with the defaults before the late target anneal,
+:data:`mope.config.CONSTANT_TARGET`: their runs were committed before the switch), and
 ``envelope`` (morl-baselines' Envelope at its example's settings, :data:`mope.paper.envelope.ENVELOPE_EXAMPLE`;
 needs the optional ``bench`` extra). Environments and their evaluation settings and budgets: :data:`BENCH_ENVS`.
 
@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from mope.config import Config
+from mope.config import CONSTANT_TARGET, Config
 from mope.errors import ConfigError, MopeError, suggest
 from mope.experiments.jobs import Job, run_jobs
 from mope.experiments.locks import FolderLock
@@ -85,16 +85,16 @@ BENCH_ENVS: dict[str, EnvBench] = {
                              "no published front or budget: 50k steps (a 13x13 grid, 3 objectives); HV and EUM "
                              "against the best any method found"),
 }
-#: The candidate default of issue 33: the Polyak weight on a cosine from ``target_tau`` to 1e-4 over the second half.
-LATE_TARGET: dict[str, Any] = {"target_tau_end": 1e-4, "target_tau_anneal_from": 0.5}
-#: Methods: name -> config settings (``envelope`` is morl-baselines' Envelope).
+#: Methods: name -> config settings (``envelope`` is morl-baselines' Envelope). The ``*-const`` methods are the
+#: defaults before the late target anneal (issue 33): the Polyak weight constant for the whole run.
 METHODS: dict[str, dict[str, Any]] = {"mope": {"algo": "mope"}, "eql": {"algo": "eql"},
                                       "mope-paper": {"algo": "mope", "preset": "paper"},
                                       "eql-paper": {"algo": "eql", "preset": "paper"},
                                       "mope-bound": {"algo": "mope", "seen_bound_margin": 0.1},
-                                      "mope-late": {"algo": "mope", **LATE_TARGET},
-                                      "eql-late": {"algo": "eql", **LATE_TARGET},
-                                      "mope-late-bound": {"algo": "mope", **LATE_TARGET, "seen_bound_margin": 0.1},
+                                      "mope-const": {"algo": "mope", **CONSTANT_TARGET},
+                                      "eql-const": {"algo": "eql", **CONSTANT_TARGET},
+                                      "mope-const-bound": {"algo": "mope", **CONSTANT_TARGET,
+                                                           "seen_bound_margin": 0.1},
                                       "envelope": {}}
 DEFAULT_METHODS = ("mope", "eql", "mope-paper", "envelope")
 

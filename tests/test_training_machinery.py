@@ -86,7 +86,7 @@ def test_target_tau_end_anneals_the_polyak_weight_on_the_cosine() -> None:
     from mope.agent.agent import polyak_weight
 
     agent = MoPE("deep-sea-treasure-v0", Config.for_algo("mope", **SMALL, total_steps=100, target_tau=0.01,
-                                                         target_tau_end=0.001))
+                                                         target_tau_end=0.001, target_tau_anneal_from=0.0))
     taus = [polyak_weight(agent.config, step) for step in (0, 50, 100, 200)]
     assert taus == pytest.approx([0.01, 0.0055, 0.001, 0.001])
     with torch.no_grad():  # one Polyak step at step 50 moves the target 0.0055 of the way to the online weights
@@ -96,7 +96,9 @@ def test_target_tau_end_anneals_the_polyak_weight_on_the_cosine() -> None:
     agent._polyak()
     online, target = next(agent.q_net.parameters()), next(agent.target_net.parameters())
     assert torch.allclose(target, 0.0055 * online)
-    assert polyak_weight(Config.for_algo("mope", **SMALL, total_steps=100), 100) == 0.005
+    assert polyak_weight(Config.for_algo("mope", **SMALL, total_steps=100, target_tau_end=None), 100) == 0.005
+    default = Config.for_algo("mope", **SMALL, total_steps=100)  # the default: constant to half the run, then 1e-4
+    assert [polyak_weight(default, step) for step in (50, 100)] == pytest.approx([0.005, 1e-4])
     late = Config.for_algo("mope", **SMALL, total_steps=100, target_tau=0.01, target_tau_end=0.001,
                            target_tau_anneal_from=0.5)  # constant over the first half, the cosine over the second
     assert [polyak_weight(late, step) for step in (0, 50, 75, 100)] == pytest.approx([0.01, 0.01, 0.0055, 0.001])

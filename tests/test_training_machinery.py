@@ -301,6 +301,8 @@ def _rows(folder: Path) -> list[dict[str, str]]:
 @pytest.mark.parametrize(("args", "needle"), [
     (["--envs", "deep-sea-treasur-v0"], "unknown environment 'deep-sea-treasur-v0'"),
     (["--methods", "mopee"], "unknown method 'mopee' (did you mean 'mope'?)"),
+    (["--methods", "mope-late-bound"], "method 'mope-late-bound' was renamed 'mope-bound'"),
+    (["--methods", "eql-late"], "method 'eql-late' was renamed 'eql'"),
     (["--envs", "mope/RobotConfrontation-v0"], "continuous action space"),
     (["--steps", "0"], "--steps 0 is out of range"),
     (["--seeds", "0"], "--seeds=0 is out of range"),

@@ -97,6 +97,8 @@ METHODS: dict[str, dict[str, Any]] = {"mope": {"algo": "mope"}, "eql": {"algo": 
                                                            "seen_bound_margin": 0.1},
                                       "envelope": {}}
 DEFAULT_METHODS = ("mope", "eql", "mope-paper", "envelope")
+#: Method names before 2026-12-06, when the late target anneal became the default: old name -> today's name.
+RENAMED_METHODS = {"mope-late": "mope", "eql-late": "eql", "mope-late-bound": "mope-bound"}
 
 
 def check_choices(envs: list[str], methods: list[str], seeds: int | str | Sequence[int], steps: int | None
@@ -112,6 +114,9 @@ def check_choices(envs: list[str], methods: list[str], seeds: int | str | Sequen
             raise ConfigError(f"environment '{env_id}' has no benchmark settings; choose from {', '.join(BENCH_ENVS)}"
                               " (or add it to mope.paper.benchmark.BENCH_ENVS)")
     for m in methods:
+        if m in RENAMED_METHODS:
+            raise ConfigError(f"method '{m}' was renamed '{RENAMED_METHODS[m]}' when the late target anneal became "
+                              "the default (2026-12-06); the '*-const' methods keep the constant target")
         if m not in METHODS:
             raise ConfigError(f"unknown method '{m}'{suggest(m, METHODS)}; choose from {', '.join(METHODS)}")
     seed_values = seed_list(seeds)

@@ -79,8 +79,10 @@ BENCH_ENVS: dict[str, EnvBench] = {
                                       "no published EQL budget: 2.5x Deep-Sea-Treasure's (a 5x5 grid, 3 objectives, "
                                       "the front's 3 points need the enemy-free detours)", stochastic=True),
     "minecart-deterministic-v0": EnvBench(100_000, 2_000, 5_000, 100, 1_000,
-                                          "morl-baselines' Envelope example (examples/envelope_minecart.py): 100k "
-                                          "steps; 100 preferences (each episode can last 1,000 steps)"),
+                                          "a tenth of morl-baselines' Envelope example (examples/envelope_minecart.py"
+                                          " trains 1M steps, epsilon over 50k, gamma 0.98), for 2 cores: 100k steps, "
+                                          "epsilon over 10k and gamma 0.99 for every method; 100 preferences (each "
+                                          "episode can last 1,000 steps)"),
     "four-room-v0": EnvBench(50_000, 2_000, 2_500, 200, None,
                              "no published front or budget: 50k steps (a 13x13 grid, 3 objectives); HV and EUM "
                              "against the best any method found"),

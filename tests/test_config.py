@@ -285,6 +285,39 @@ def test_presets() -> None:
         Config.from_dict({"preset": "papr"})
 
 
+def test_exploration_and_buffer_follow_the_run_length_unless_set() -> None:
+    from mope.config import ENV_DEFAULTS, buffer_capacity, epsilon_decay_steps_of
+
+    def resolved(c: Config) -> tuple[int, int]:
+        return epsilon_decay_steps_of(c), buffer_capacity(c)
+
+    # half the run and the whole run; Deep-Sea-Treasure's 20k (and anything shorter) keeps 10k and 20k
+    assert [resolved(Config(total_steps=t)) for t in (500, 20_000, 50_000, 100_000, 3_000_000)] == [
+        (10_000, 20_000), (10_000, 20_000), (25_000, 50_000), (50_000, 100_000), (1_500_000, 1_000_000)]
+    assert resolved(Config(total_steps=100_000, epsilon_decay_steps=7, buffer_size=300)) == (7, 300)
+    c = Config(total_steps=100_000)
+    assert c.to_dict()["buffer_size"] is None and resolved(Config.from_dict(c.to_dict())) == (50_000, 100_000)
+    assert resolved(c.replace(total_steps=60_000)) == (30_000, 60_000)  # None follows a changed budget
+    # the presets and the robot game keep their fixed values
+    assert resolved(Config.from_dict({"preset": "paper", "total_steps": 100_000})) == (10_000, 20_000)
+    assert resolved(Config.for_algo("eql", preset="envelope", total_steps=100_000)) == (10_000, 20_000)
+    game = Config.from_dict({"env_id": next(iter(ENV_DEFAULTS)), "total_steps": 200_000})
+    assert resolved(game) == (10_000, 100_000)
+    with pytest.raises(ConfigError, match=r"epsilon_decay_steps=0 is out of range: must be >= 1 or None"):
+        Config(epsilon_decay_steps=0)
+    with pytest.raises(ConfigError, match=r"n_envs=20 is out of range: must lie in \[1, 16\]"):
+        Config(n_envs=20, buffer_size=32, batch_size=32)
+
+
+def test_the_agent_explores_over_half_a_long_run() -> None:
+    from mope import MoPE
+
+    agent = MoPE("deep-sea-treasure-v0", total_steps=100_000, hidden_sizes=(8,), n_omega=2)
+    agent.global_step = 40_000
+    assert agent.epsilon == pytest.approx(1.0 - 0.95 * 0.8)  # with the old fixed 10k it was at its floor, 0.05
+    assert agent.buffer.capacity == 100_000
+
+
 def test_a_config_saved_by_mope_0_1_reads_with_the_defaults_it_was_trained_with() -> None:
     saved = {**{k: v for k, v in OLD_DEFAULTS.items() if k not in ("q_head", "learning_rate_end", "target_tau",
                                                                    "relabel_broad", "lb_homotopy_steps")},

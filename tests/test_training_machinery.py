@@ -432,26 +432,61 @@ def test_benchmark_mope_bound_is_the_defaults_with_the_seen_return_bound(tmp_pat
     assert table["mope"]["stats"]["eum"]["mean"] == pytest.approx(1.25)
 
 
-def test_benchmark_const_methods_are_the_defaults_before_the_late_target_anneal(tmp_path: Path) -> None:
-    """The defaults anneal the target network's Polyak weight over the run's second half (issue 33); ``mope-const``
-    and ``eql-const`` differ from ``mope`` and ``eql`` by the two anneal fields only (``mope-const-bound`` from
-    ``mope-bound`` likewise), so the runs committed before the switch keep their config under their new names, and
-    those runs are found by name beside the defaults'."""
-    from mope.config import CONSTANT_TARGET
+def test_benchmark_older_methods_are_the_defaults_they_ran_with(tmp_path: Path) -> None:
+    """The defaults explore over half the run and keep it all in the buffer; ``mope-eps10k`` and ``eql-eps10k``
+    differ from ``mope`` and ``eql`` by those two fields only (:data:`SHORT_EXPLORATION`), and ``mope-const`` and
+    ``eql-const`` from those by the late target anneal and ``reward_norm`` (``mope-bound`` alike), so the runs
+    committed before each switch keep their config under their new names, found by name beside the defaults'."""
+    from mope.config import CONSTANT_TARGET, SHORT_EXPLORATION
     from mope.paper.benchmark import benchmark_jobs, finished_runs
 
     assert (Config().target_tau_end, Config().target_tau_anneal_from) == (1e-4, 0.5)
-    jobs = benchmark_jobs(["resource-gathering-v0"], ["mope", "mope-const", "eql", "eql-const", "mope-bound",
-                                                      "mope-const-bound"], [1], quick=False, steps=None)
-    by_name = {j.name: j.payload for j in jobs}
-    for late, old in (("mope", "mope-const"), ("eql", "eql-const"), ("mope-bound", "mope-const-bound")):
-        base, const = by_name[f"resource-gathering-v0-{late}-s1"], by_name[f"resource-gathering-v0-{old}-s1"]
-        assert {k: const[k] for k in const if const[k] != base[k]} == CONSTANT_TARGET
-        assert (base["target_tau_end"], base["target_tau_anneal_from"]) == (1e-4, 0.5)
-    assert by_name["resource-gathering-v0-mope-const-bound-s1"]["seen_bound_margin"] == 0.1
+    methods = ["mope", "mope-eps10k", "mope-const", "eql", "eql-eps10k", "eql-const", "mope-bound",
+               "mope-bound-eps10k", "mope-const-bound"]
+    jobs = benchmark_jobs(["resource-gathering-v0"], methods, [1], quick=False, steps=None)
+    by_name = {j.name.removeprefix("resource-gathering-v0-").removesuffix("-s1"): j.payload for j in jobs}
+
+    def changed(old: str, new: str) -> dict:
+        return {k: by_name[old][k] for k in by_name[old] if by_name[old][k] != by_name[new][k]}
+
+    for now in ("mope", "eql", "mope-bound"):
+        assert changed(f"{now}-eps10k", now) == SHORT_EXPLORATION
+    for short, const in (("mope-eps10k", "mope-const"), ("eql-eps10k", "eql-const"),
+                         ("mope-bound-eps10k", "mope-const-bound")):
+        assert changed(const, short) == {**CONSTANT_TARGET, "reward_norm": None}
+    assert (by_name["mope"]["epsilon_decay_steps"], by_name["mope"]["buffer_size"]) == (None, None)
+    assert by_name["mope-const-bound"]["seen_bound_margin"] == 0.1
     out = tmp_path / "bench"
-    _fake_bench_run(out, "resource-gathering-v0", "eql-const", 1, 50_000, 0.5)
-    assert [j.name for j in finished_runs(out)] == ["resource-gathering-v0-eql-const-s1"]
+    _fake_bench_run(out, "resource-gathering-v0", "eql-eps10k", 1, 50_000, 0.5)
+    assert [j.name for j in finished_runs(out)] == ["resource-gathering-v0-eql-eps10k-s1"]
+
+
+def test_committed_benchmark_runs_ran_their_methods_settings() -> None:
+    """Every committed mope run trained with what its method's job sets today (epsilon's decay and the buffer
+    resolved): the folder names and METHODS cannot drift apart unseen."""
+    from mope.config import buffer_capacity, epsilon_decay_steps_of
+    from mope.paper.benchmark import benchmark_jobs, finished_runs
+
+    out = Path(__file__).resolve().parents[1] / "docs/results/benchmark"
+    learning = [*Config.hyperparameter_names(), "eval_every", "eval_prefs"]
+
+    def settings(data: dict) -> dict:
+        c = Config.from_dict(data)
+        d = c.to_dict()
+        d["epsilon_decay_steps"], d["buffer_size"] = epsilon_decay_steps_of(c), buffer_capacity(c)
+        return {k: d[k] for k in learning}
+
+    checked = 0
+    for job in finished_runs(out):
+        if job.kind == "envelope":
+            continue
+        saved = json.loads((out / job.name / "config.json").read_text())
+        env_id, seed = saved["env_id"], saved["seed"]
+        method = job.name[len(env_id) + 1:].rpartition("-s")[0]
+        [ref] = benchmark_jobs([env_id], [method], [seed], quick=False, steps=None)
+        assert settings(saved) == settings(ref.payload), job.name
+        checked += 1
+    assert checked >= 90
 
 
 def test_the_presets_and_the_robot_game_keep_the_constant_target() -> None:

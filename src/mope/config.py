@@ -44,6 +44,10 @@ DEVICES = ("cpu", "cuda", "auto")
 #: (issue 33). The presets and the robot game keep it; ``mope benchmark``'s ``*-const`` methods pin it.
 CONSTANT_TARGET: dict[str, Any] = {"target_tau_end": None, "target_tau_anneal_from": 0.0}
 
+#: Epsilon's decay and the replay capacity before they followed the run's length (issue 33, 2026-12-06, later): a fixed 10k
+#: and 20k, whatever the budget. The presets, the robot game and ``mope benchmark``'s ``*-eps10k`` methods keep them.
+SHORT_EXPLORATION: dict[str, Any] = {"epsilon_decay_steps": 10_000, "buffer_size": 20_000}
+
 #: Named sets of defaults: ``Config.from_dict({"preset": name, ...})``, ``mope train --preset name``.
 #: ``mope`` is the dataclass defaults (see docs/design.md, "The learner"); ``paper`` is the paper's literal settings
 #: as mope 0.1 ran them (the defaults before the learning study, double Q-learning and target clipping included);
@@ -55,13 +59,13 @@ PRESETS: dict[str, dict[str, Any]] = {
               "learning_rate": 1e-3, "learning_rate_end": None, "batch_size": 32, "target_tau": None,
               "target_update_freq": 100, "max_grad_norm": 10.0, "n_omega": 64, "relabel_broad": 0.0,
               "envelope_prefs": "relabel", "return_mix": 0.0, "n_step": 1, "epsilon_decay_steps": 10_000,
-              "reward_norm": None, **CONSTANT_TARGET},
+              "buffer_size": 20_000, "reward_norm": None, **CONSTANT_TARGET},
     "envelope": {"q_head": "conditioned", "obs_encoding": "scale", "hidden_sizes": [256, 256, 256, 256],
                  "learning_rate": 3e-4, "learning_rate_end": None, "batch_size": 64, "n_omega": 4,
                  "target_tau": None, "target_update_freq": 1000, "max_grad_norm": 0.1, "lb_homotopy_steps": 10_000,
                  "relabel_broad": 0.0, "envelope_prefs": "relabel", "clip_targets": False, "learning_starts": 100,
                  "per_alpha": 0.6, "return_mix": 0.0, "n_step": 1, "epsilon_decay_steps": 10_000,
-                 "reward_norm": None, **CONSTANT_TARGET},
+                 "buffer_size": 20_000, "reward_norm": None, **CONSTANT_TARGET},
 }
 
 #: Per-environment defaults: ``mope train --env ID`` and ``MoPE(ID)`` use them for every setting not given (by a
@@ -72,7 +76,8 @@ PRESETS: dict[str, dict[str, Any]] = {
 #: keeps the constant target: on 5 paired seeds the late anneal won 0.031 less at w_catch 0.8-1, past the 0.03 its
 #: rule allowed (docs/results/game-study/late-target-amd).
 ENV_DEFAULTS: dict[str, dict[str, Any]] = {
-    "mope/RobotConfrontationDiscrete-v0": {"n_envs": 4, "buffer_size": 100_000, "demos": "scripted",
+    "mope/RobotConfrontationDiscrete-v0": {"n_envs": 4, "buffer_size": 100_000, "epsilon_decay_steps": 10_000,
+                                           "demos": "scripted",
                                            "demo_episodes": 50, "demo_batch_share": 0.25,
                                            "demo_pretrain_steps": 5_000,
                                            "eval_every": 20_000, "eval_prefs": 200, **CONSTANT_TARGET},
@@ -251,7 +256,8 @@ class Config:
     learning_rate: float = 3e-4
     learning_rate_end: float | None = 3e-5  # cosine decay of the learning rate to it over total_steps (None: constant)
     batch_size: int = 128
-    buffer_size: int = 20_000
+    #: Replay capacity; None: the whole run (total_steps), at least 20k and at most 1M (:func:`buffer_capacity`).
+    buffer_size: int | None = None
     learning_starts: int = 200
     #: Training envs stepped together, one forward pass acting for all (SB3's ``n_envs``).
     n_envs: int = 1
@@ -285,7 +291,8 @@ class Config:
     seen_bound_margin: float | None = None
     epsilon_start: float = 1.0
     epsilon_end: float = 0.05
-    epsilon_decay_steps: int = 10_000
+    #: Steps of epsilon's linear decay; None: half the run, at least 10k (:func:`epsilon_decay_steps_of`).
+    epsilon_decay_steps: int | None = None
     #: Preferences per transition (N_omega): EQL's uniform, shared by the batch (Yang's ``weight_num``); EE's near it.
     n_omega: int = 32
 
@@ -470,6 +477,23 @@ class Config:
         return cls.from_dict(read_config_file(path))
 
 
+def epsilon_decay_steps_of(config: Config) -> int:
+    """Steps over which epsilon decays: ``epsilon_decay_steps``, or when it is None half of ``total_steps`` but at
+    least 10k (Deep-Sea-Treasure's 20k steps keep 10k). On minecart's 100k steps, 10k stopped the carts coming home
+    once epsilon reached its floor; half the run with the whole run kept did not (docs/results/minecart-probes)."""
+    if config.epsilon_decay_steps is not None:
+        return config.epsilon_decay_steps
+    return max(10_000, config.total_steps // 2)
+
+
+def buffer_capacity(config: Config) -> int:
+    """Transitions the replay buffer holds: ``buffer_size``, or when it is None the whole run (``total_steps``), at
+    least 20k (Deep-Sea-Treasure's runs keep 20k) and at most 1M (SB3's default; a longer run keeps its last 1M)."""
+    if config.buffer_size is not None:
+        return config.buffer_size
+    return min(max(config.total_steps, 20_000), 1_000_000)
+
+
 def migrate(data: dict[str, Any]) -> dict[str, Any]:
     """A saved config of an older mope, brought to today's fields with the values it ran with (a copy).
 
@@ -512,12 +536,15 @@ def _validate_hyperparameters(self: Config) -> None:
     for name in ("learning_rate", "disc_learning_rate", "sigma_omega", "per_eps", "pe_count_offset",
                  "reward_scale"):
         need(_finite(getattr(self, name)) and getattr(self, name) > 0, name, "must be > 0")
-    need(1 <= self.n_envs <= min(1024, self.buffer_size // 2), "n_envs",
-         f"must lie in [1, {min(1024, self.buffer_size // 2)}] (1024, and half of buffer_size at most)")
-    for name in ("batch_size", "gradient_steps", "train_freq", "target_update_freq", "epsilon_decay_steps",
-                 "n_omega", "n_intervals", "n_components", "n_critics", "return_window"):
+    capacity = buffer_capacity(self)
+    need(1 <= self.n_envs <= min(1024, capacity // 2), "n_envs",
+         f"must lie in [1, {min(1024, capacity // 2)}] (1024, and half of buffer_size={capacity} at most)")
+    for name in ("batch_size", "gradient_steps", "train_freq", "target_update_freq", "n_omega", "n_intervals",
+                 "n_components", "n_critics", "return_window"):
         need(getattr(self, name) >= 1, name, "must be >= 1")
-    need(self.buffer_size >= self.batch_size, "buffer_size", f"must be >= batch_size ({self.batch_size})")
+    need(epsilon_decay_steps_of(self) >= 1, "epsilon_decay_steps", "must be >= 1 or None (half the run)")
+    need(capacity >= self.batch_size, "buffer_size", f"must be >= batch_size ({self.batch_size}) or None "
+         "(the whole run)")
     need(1 <= self.n_step <= 1000, "n_step", "must lie in [1, 1000] (an update runs batch_size x n_step states)")
     for name in ("learning_starts", "lb_homotopy_steps", "demo_pretrain_steps", "demo_roll_in"):
         need(getattr(self, name) >= 0, name, "must be >= 0")

@@ -49,7 +49,7 @@ from mope.agent.demonstrations import (
 )
 from mope.agent.networks import ConvexQNetwork, Discriminator, make_q_network
 from mope.agent.replay import Batch, ReplayBuffer
-from mope.config import Config, check_algo
+from mope.config import Config, buffer_capacity, check_algo
 from mope.envs import check_env_fits, make_env
 from mope.errors import ConfigError, MopeError
 from mope.preferences import PreferenceSampler, sample_neighbours, sample_simplex
@@ -275,9 +275,9 @@ def add_demonstrations(buffer: ReplayBuffer, cfg: Config, env: gym.Env) -> Demon
     demos = demonstrations_for(cfg, env)
     if demos is None:
         return None
-    if len(demos) > cfg.buffer_size // 2:
+    if len(demos) > buffer_capacity(cfg) // 2:
         raise ConfigError(f"the demonstrations hold {len(demos)} transitions, more than half of "
-                          f"buffer_size={cfg.buffer_size}; raise buffer_size or use fewer demo_episodes")
+                          f"buffer_size={buffer_capacity(cfg)}; raise buffer_size or use fewer demo_episodes")
     buffer.add_batch(demos.obs, demos.prefs, demos.actions, demos.rewards, demos.next_obs, demos.terminated,
                      demos.dones)
     buffer.keep_written()
@@ -389,7 +389,7 @@ class MoPE(BaseAgent):
         self.reward_scale = learner_reward_scale(largest_reward(self.env), cfg.reward_scale, cfg.reward_norm)
         self.set_target_clamp()
         obs_dtype = np.float32 if not isinstance(spec.obs_space, gym.spaces.Discrete) else np.int64
-        self.buffer = ReplayBuffer(cfg.buffer_size, self.obs_shape, self.m, cfg.per, obs_dtype)
+        self.buffer = ReplayBuffer(buffer_capacity(cfg), self.obs_shape, self.m, cfg.per, obs_dtype)
         self.buffer.stride = cfg.n_envs
         self.observe_demonstrations(add_demonstrations(self.buffer, cfg, self.env))
         self.global_step = 0

@@ -18,6 +18,7 @@ from mope.agent import losses
 from mope.agent.agent_state import AgentState, Episode
 from mope.agent.demonstrations import label_actions
 from mope.agent.replay import ReplayBuffer
+from mope.config import epsilon_decay_steps_of
 from mope.errors import MopeError
 from mope.preferences import validate_preference
 
@@ -89,7 +90,7 @@ class BaseAgent(AgentState):
     def epsilon(self) -> float:
         """Current exploration rate."""
         c = self.config
-        return linear_schedule(c.epsilon_start, c.epsilon_end, c.epsilon_decay_steps, self.global_step)
+        return linear_schedule(c.epsilon_start, c.epsilon_end, epsilon_decay_steps_of(c), self.global_step)
 
     def _tensor(self, x: np.ndarray, dtype: torch.dtype = torch.float32) -> torch.Tensor:
         return torch.as_tensor(np.asarray(x), dtype=dtype, device=self.device)

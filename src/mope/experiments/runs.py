@@ -46,7 +46,7 @@ import torch
 from mope.agent.agent import MoPE, TrainingDivergedError, agent_class, without_inert_reward_norm
 from mope.agent.checkpoint import mope_version
 from mope.agent.runner import Callback, EvalCallback, IntervalStats, ProgressBar, StopWhen, crossed_now, train
-from mope.config import Config
+from mope.config import Config, buffer_capacity
 from mope.envs import make_env
 from mope.errors import CheckpointError, MopeError, is_disk_full, one_line, short_repr
 from mope.evaluation.evaluator import OUTCOME_KEYS, TRUTH_KEYS, Evaluator, Solutions, solutions
@@ -430,7 +430,7 @@ def estimate_memory(config: Config, env: Any) -> tuple[int, int]:
     widths = [obs_in + m, *config.hidden_sizes, n_actions * m * max(1, config.n_components)]
     params = sum(a * b + b for a, b in zip(widths, widths[1:], strict=False)) * max(1, config.n_critics)
     nets = params * 4 * 6  # q and target networks, gradients, Adam's two moments, one spare copy when saving
-    return config.buffer_size * per + nets, per
+    return buffer_capacity(config) * per + nets, per
 
 
 def check_resources(config: Config) -> None:
@@ -450,8 +450,8 @@ def check_resources(config: Config) -> None:
             env.close()
     avail = available_memory()
     if avail is not None and need > 0.9 * avail:
-        fit = max(0, int((0.8 * avail - (need - config.buffer_size * per)) // per))
-        raise MopeError(f"buffer_size={config.buffer_size} needs about {_gib(need)} of memory ({per} bytes per "
+        fit = max(0, int((0.8 * avail - (need - buffer_capacity(config) * per)) // per))
+        raise MopeError(f"buffer_size={buffer_capacity(config)} needs about {_gib(need)} of memory ({per} bytes per "
                         f"transition, networks included) but {_gib(avail)} is available; lower buffer_size (about "
                         f"{fit} fits here) or hidden_sizes")
 
@@ -462,7 +462,7 @@ def build_agent(config: Config) -> MoPE:
     try:
         return agent_class(config.algo)(config.env_id, config)
     except MemoryError:
-        raise MopeError(f"out of memory building the agent (buffer_size={config.buffer_size}, hidden_sizes="
+        raise MopeError(f"out of memory building the agent (buffer_size={buffer_capacity(config)}, hidden_sizes="
                         f"{list(config.hidden_sizes)}); lower them") from None
     except RuntimeError as exc:  # torch: "can't allocate memory", CUDA out of memory
         if "alloc" not in str(exc).lower() and "out of memory" not in str(exc).lower():

@@ -7,8 +7,10 @@ per environment.
 
 Methods: ``mope`` and ``eql`` (the defaults), ``mope-paper`` and ``eql-paper`` (the paper preset), ``mope-bound``
 (the defaults with the seen-return bound, ``seen_bound_margin=0.1``: a candidate default, not one yet),
-``mope-const``, ``eql-const`` and ``mope-const-bound`` (the same with the defaults before the late target anneal,
-:data:`mope.config.CONSTANT_TARGET`: their runs were committed before the switch), and
+``mope-eps10k``, ``eql-eps10k`` and ``mope-bound-eps10k`` (the same with epsilon over 10k steps and a 20k buffer
+whatever the budget, :data:`mope.config.SHORT_EXPLORATION`: the defaults before both followed the run's length),
+``mope-const``, ``eql-const`` and ``mope-const-bound`` (also before the late target anneal,
+:data:`mope.config.CONSTANT_TARGET`; their runs were committed before the switch), and
 ``envelope`` (morl-baselines' Envelope at its example's settings, :data:`mope.paper.envelope.ENVELOPE_EXAMPLE`;
 needs the optional ``bench`` extra). Environments and their evaluation settings and budgets: :data:`BENCH_ENVS`.
 
@@ -38,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from mope.config import CONSTANT_TARGET, Config
+from mope.config import CONSTANT_TARGET, SHORT_EXPLORATION, Config
 from mope.errors import ConfigError, MopeError, suggest
 from mope.experiments.jobs import Job, run_jobs
 from mope.experiments.locks import FolderLock
@@ -87,16 +89,23 @@ BENCH_ENVS: dict[str, EnvBench] = {
                              "no published front or budget: 50k steps (a 13x13 grid, 3 objectives); HV and EUM "
                              "against the best any method found"),
 }
-#: Methods: name -> config settings (``envelope`` is morl-baselines' Envelope). The ``*-const`` methods are the
-#: defaults before the late target anneal (issue 33): the Polyak weight constant for the whole run.
+#: Methods: name -> config settings (``envelope`` is morl-baselines' Envelope). The ``*-eps10k`` methods are the
+#: defaults before epsilon's decay and the replay buffer followed the run's length (2026-12-06, later): epsilon over 10k
+#: steps and a 20k buffer whatever the budget. The ``*-const`` methods are the defaults before the late target anneal
+#: (issue 33): the Polyak weight constant for the whole run, with the fixed 10k and 20k of that time and no reward
+#: normalisation (``reward_norm`` came later; it scales Deep-Sea-Treasure's rewards only, the others stay below 25).
+BEFORE_ANNEAL: dict[str, Any] = {**CONSTANT_TARGET, **SHORT_EXPLORATION, "reward_norm": None}
 METHODS: dict[str, dict[str, Any]] = {"mope": {"algo": "mope"}, "eql": {"algo": "eql"},
                                       "mope-paper": {"algo": "mope", "preset": "paper"},
                                       "eql-paper": {"algo": "eql", "preset": "paper"},
                                       "mope-bound": {"algo": "mope", "seen_bound_margin": 0.1},
-                                      "mope-const": {"algo": "mope", **CONSTANT_TARGET},
-                                      "eql-const": {"algo": "eql", **CONSTANT_TARGET},
-                                      "mope-const-bound": {"algo": "mope", **CONSTANT_TARGET,
-                                                           "seen_bound_margin": 0.1},
+                                      "mope-eps10k": {"algo": "mope", **SHORT_EXPLORATION},
+                                      "eql-eps10k": {"algo": "eql", **SHORT_EXPLORATION},
+                                      "mope-bound-eps10k": {"algo": "mope", "seen_bound_margin": 0.1,
+                                                            **SHORT_EXPLORATION},
+                                      "mope-const": {"algo": "mope", **BEFORE_ANNEAL},
+                                      "eql-const": {"algo": "eql", **BEFORE_ANNEAL},
+                                      "mope-const-bound": {"algo": "mope", **BEFORE_ANNEAL, "seen_bound_margin": 0.1},
                                       "envelope": {}}
 DEFAULT_METHODS = ("mope", "eql", "mope-paper", "envelope")
 #: Method names before 2026-12-06, when the late target anneal became the default: old name -> today's name.

@@ -44,8 +44,8 @@ DEVICES = ("cpu", "cuda", "auto")
 #: (issue 33). The presets and the robot game keep it; ``mope benchmark``'s ``*-const`` methods pin it.
 CONSTANT_TARGET: dict[str, Any] = {"target_tau_end": None, "target_tau_anneal_from": 0.0}
 
-#: Epsilon's decay and the replay capacity before they followed the run's length (issue 33, 2026-12-06, later): a fixed 10k
-#: and 20k, whatever the budget. The presets, the robot game and ``mope benchmark``'s ``*-eps10k`` methods keep them.
+#: Epsilon's decay and the replay capacity before they followed the run's length (issue 33, later on 2026-12-06): a
+#: fixed 10k and 20k, whatever the budget. The presets, the robot game and ``mope benchmark``'s ``*-eps10k`` methods keep them.
 SHORT_EXPLORATION: dict[str, Any] = {"epsilon_decay_steps": 10_000, "buffer_size": 20_000}
 
 #: Named sets of defaults: ``Config.from_dict({"preset": name, ...})``, ``mope train --preset name``.
@@ -256,8 +256,7 @@ class Config:
     learning_rate: float = 3e-4
     learning_rate_end: float | None = 3e-5  # cosine decay of the learning rate to it over total_steps (None: constant)
     batch_size: int = 128
-    #: Replay capacity; None: the whole run (total_steps), at least 20k and at most 1M (:func:`buffer_capacity`).
-    buffer_size: int | None = None
+    buffer_size: int | None = None  # None: the whole run, at least 20k and at most 1M (buffer_capacity)
     learning_starts: int = 200
     #: Training envs stepped together, one forward pass acting for all (SB3's ``n_envs``).
     n_envs: int = 1
@@ -291,8 +290,7 @@ class Config:
     seen_bound_margin: float | None = None
     epsilon_start: float = 1.0
     epsilon_end: float = 0.05
-    #: Steps of epsilon's linear decay; None: half the run, at least 10k (:func:`epsilon_decay_steps_of`).
-    epsilon_decay_steps: int | None = None
+    epsilon_decay_steps: int | None = None  # None: half the run, at least 10k (epsilon_decay_steps_of)
     #: Preferences per transition (N_omega): EQL's uniform, shared by the batch (Yang's ``weight_num``); EE's near it.
     n_omega: int = 32
 

@@ -45,7 +45,8 @@ DEVICES = ("cpu", "cuda", "auto")
 CONSTANT_TARGET: dict[str, Any] = {"target_tau_end": None, "target_tau_anneal_from": 0.0}
 
 #: Epsilon's decay and the replay capacity before they followed the run's length (issue 33, later on 2026-12-06): a
-#: fixed 10k and 20k, whatever the budget. The presets, the robot game and ``mope benchmark``'s ``*-eps10k`` methods keep them.
+#: fixed 10k and 20k, whatever the budget. The presets, the robot game and ``mope benchmark``'s ``*-eps10k`` methods
+#: keep them.
 SHORT_EXPLORATION: dict[str, Any] = {"epsilon_decay_steps": 10_000, "buffer_size": 20_000}
 
 #: Named sets of defaults: ``Config.from_dict({"preset": name, ...})``, ``mope train --preset name``.

@@ -44,6 +44,8 @@ def test_train_writes_a_complete_run_folder(run_dir):
         assert len(list(csv.DictReader(f))) == 200
     summary = json.loads((run_dir / "summary.json").read_text())
     assert summary["algo"] == "mope" and summary["s_per_1k_steps"] > 0
+    assert config["buffer_size"] is None and summary["resolved"] == {"epsilon_decay_steps": 10_000,
+                                                                      "buffer_size": 20_000}
 
 
 def test_eval_prints_metrics_and_writes_solutions(run_dir, tmp_path):

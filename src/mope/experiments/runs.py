@@ -46,7 +46,7 @@ import torch
 from mope.agent.agent import MoPE, TrainingDivergedError, agent_class, without_inert_reward_norm
 from mope.agent.checkpoint import mope_version
 from mope.agent.runner import Callback, EvalCallback, IntervalStats, ProgressBar, StopWhen, crossed_now, train
-from mope.config import Config, buffer_capacity
+from mope.config import Config, buffer_capacity, epsilon_decay_steps_of
 from mope.envs import make_env
 from mope.errors import CheckpointError, MopeError, is_disk_full, one_line, short_repr
 from mope.evaluation.evaluator import OUTCOME_KEYS, TRUTH_KEYS, Evaluator, Solutions, solutions
@@ -670,7 +670,9 @@ def _finish_run(agent: MoPE, config: Config, out: Path, all_records: list[dict],
     write_summary(out, {"final": final, "wall_s": agent.wall_s, "s_per_1k_steps": per_1k * agent.wall_s,
                         "eval_s": eval_s, "train_s_per_1k_steps": per_1k * (agent.wall_s - eval_s),
                         "algo": config.algo, "env_id": config.env_id, "seed": config.seed,
-                        "resumed": status == "resumable"})
+                        "resumed": status == "resumable",
+                        "resolved": {"epsilon_decay_steps": epsilon_decay_steps_of(config),  # None in config.json
+                                     "buffer_size": buffer_capacity(config)}})
     return RunResult(out, agent, all_records, final, agent.wall_s)
 
 

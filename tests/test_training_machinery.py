@@ -342,7 +342,7 @@ def _fake_bench_run(out: Path, env_id: str, method: str, seed: int, steps: int, 
 
     folder = out / f"{env_id}-{method}-s{seed}"
     folder.mkdir(parents=True)
-    meta = "peer.json" if method == "envelope" else "config.json"
+    meta = "peer.json" if method.startswith("envelope") else "config.json"
     (folder / meta).write_text(json.dumps({"env_id": env_id, "seed": seed, "total_steps": steps}))
     with open(folder / "metrics.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=METRIC_COLUMNS, restval="nan")
@@ -459,6 +459,24 @@ def test_benchmark_older_methods_are_the_defaults_they_ran_with(tmp_path: Path) 
     out = tmp_path / "bench"
     _fake_bench_run(out, "resource-gathering-v0", "eql-eps10k", 1, 50_000, 0.5)
     assert [j.name for j in finished_runs(out)] == ["resource-gathering-v0-eql-eps10k-s1"]
+
+
+def test_benchmark_envelope_eps_half_explores_as_long_as_mope(tmp_path: Path) -> None:
+    """``envelope-eps-half`` is Envelope's example with mope's exploration schedule (half the run, at least 10k)."""
+    from mope.config import epsilon_decay_steps_of
+    from mope.paper.benchmark import benchmark_jobs, finished_runs
+
+    for env_id, total in (("minecart-deterministic-v0", 100_000), ("deep-sea-treasure-v0", 20_000)):
+        jobs = {j.name.rpartition(env_id + "-")[2]: j for j in
+                benchmark_jobs([env_id], ["envelope", "envelope-eps-half", "mope"], [0], quick=False, steps=None)}
+        assert jobs["envelope-s0"].payload["overrides"]["epsilon_decay_steps"] == 10_000
+        half = jobs["envelope-eps-half-s0"]
+        assert half.kind == "envelope" and half.payload["overrides"]["epsilon_decay_steps"] == epsilon_decay_steps_of(
+            Config.from_dict(jobs["mope-s0"].payload)) == max(10_000, total // 2)
+        assert {k: v for k, v in half.payload["overrides"].items() if jobs["envelope-s0"].payload["overrides"][k] != v
+                } == ({"epsilon_decay_steps": 50_000} if total > 20_000 else {})  # DST: the example's 10k
+    _fake_bench_run(tmp_path, "four-room-v0", "envelope-eps-half", 2, 50_000, 0.5)
+    assert [(j.name, j.kind) for j in finished_runs(tmp_path)] == [("four-room-v0-envelope-eps-half-s2", "envelope")]
 
 
 def test_committed_benchmark_runs_ran_their_methods_settings() -> None:

@@ -12,7 +12,9 @@ whatever the budget, :data:`mope.config.SHORT_EXPLORATION`: the defaults before 
 ``mope-const``, ``eql-const`` and ``mope-const-bound`` (also before the late target anneal,
 :data:`mope.config.CONSTANT_TARGET`; their runs were committed before the switch), and
 ``envelope`` (morl-baselines' Envelope at its example's settings, :data:`mope.paper.envelope.ENVELOPE_EXAMPLE`;
-needs the optional ``bench`` extra). Environments and their evaluation settings and budgets: :data:`BENCH_ENVS`.
+needs the optional ``bench`` extra) and ``envelope-eps-half`` (the same with epsilon over half the run, as mope's
+defaults: the exploration schedule alike on both sides). Environments and their evaluation settings and budgets:
+:data:`BENCH_ENVS`.
 
 Per environment and method: CR where the front is known, EUM and its gap to the optimum, HV, the optimal share,
 time-outs, the steps and training seconds until CR = 1 (or, without a known front, until 95 % of the best final
@@ -33,7 +35,7 @@ import contextlib
 import json
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -106,7 +108,12 @@ METHODS: dict[str, dict[str, Any]] = {"mope": {"algo": "mope"}, "eql": {"algo": 
                                       "mope-const": {"algo": "mope", **BEFORE_ANNEAL},
                                       "eql-const": {"algo": "eql", **BEFORE_ANNEAL},
                                       "mope-const-bound": {"algo": "mope", **BEFORE_ANNEAL, "seen_bound_margin": 0.1},
-                                      "envelope": {}}
+                                      "envelope": {}, "envelope-eps-half": {}}
+#: morl-baselines' Envelope methods: name -> the settings that differ from its example's, given the run's budget.
+ENVELOPE_METHODS: dict[str, Callable[[int], dict[str, Any]]] = {
+    "envelope": lambda total: {},
+    "envelope-eps-half": lambda total: {"epsilon_decay_steps": max(10_000, total // 2)},  # epsilon_decay_steps_of
+}
 DEFAULT_METHODS = ("mope", "eql", "mope-paper", "envelope")
 #: Method names before 2026-12-06, when the late target anneal became the default: old name -> today's name.
 RENAMED_METHODS = {"mope-late": "mope", "eql-late": "eql", "mope-late-bound": "mope-bound"}
@@ -133,7 +140,7 @@ def check_choices(envs: list[str], methods: list[str], seeds: int | str | Sequen
     seed_values = seed_list(seeds)
     if steps is not None and steps < 1:
         raise ConfigError(f"--steps {steps} is out of range: must be >= 1 (the budget)")
-    if "envelope" in methods:
+    if set(methods) & set(ENVELOPE_METHODS):
         from mope.paper.envelope import require_morl_baselines
 
         require_morl_baselines()
@@ -155,11 +162,11 @@ def benchmark_jobs(envs: list[str], methods: list[str], seeds: Sequence[int], qu
             cap = min(b.max_episode_steps or QUICK_EPISODE_CAP, QUICK_EPISODE_CAP) if quick else b.max_episode_steps
             name = f"{env_id}-{{m}}-s{seed}".replace("/", "_")
             for m in methods:
-                if m == "envelope":
+                if m in ENVELOPE_METHODS:
                     jobs.append(Job(name.format(m=m), "envelope", {
                         "env_id": env_id, "seed": seed, "total_steps": total, "eval_every": every,
                         "eval_prefs": prefs, "max_episode_steps": cap, "gamma": 0.99,
-                        "overrides": ENVELOPE_EXAMPLE}))
+                        "overrides": {**ENVELOPE_EXAMPLE, **ENVELOPE_METHODS[m](total)}}))
                     continue
                 cfg = Config.from_dict({**METHODS[m], "env_id": env_id, "seed": seed, "total_steps": total,
                                         "eval_every": every, "eval_prefs": prefs, "max_episode_steps": cap,
@@ -220,7 +227,7 @@ def finished_runs(out: Path) -> list[Job]:
             continue
         env_id, method, seed, steps = ident
         budgets.setdefault(env_id, {}).setdefault(steps, folder.name)
-        jobs.append(Job(folder.name, "envelope" if method == "envelope" else "train",
+        jobs.append(Job(folder.name, "envelope" if method in ENVELOPE_METHODS else "train",
                         {"env_id": env_id, "seed": seed, "total_steps": steps}))
     for env_id, by_steps in budgets.items():
         if len(by_steps) > 1:

@@ -303,6 +303,8 @@ def test_exploration_and_buffer_follow_the_run_length_unless_set() -> None:
     assert resolved(Config.for_algo("eql", preset="envelope", total_steps=100_000)) == (10_000, 20_000)
     game = Config.from_dict({"env_id": next(iter(ENV_DEFAULTS)), "total_steps": 200_000})
     assert resolved(game) == (10_000, 100_000)
+    with pytest.raises(ConfigError, match=r"buffer_size=-1 is out of range: must be >= batch_size"):
+        Config(buffer_size=-1)  # named as itself, not through n_envs' bound
     with pytest.raises(ConfigError, match=r"epsilon_decay_steps=0 is out of range: must be >= 1 or None"):
         Config(epsilon_decay_steps=0)
     with pytest.raises(ConfigError, match=r"n_envs=20 is out of range: must lie in \[1, 16\]"):

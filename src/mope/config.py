@@ -482,7 +482,12 @@ def epsilon_decay_steps_of(config: Config) -> int:
     once epsilon reached its floor; half the run with the whole run kept did not (docs/results/minecart-probes)."""
     if config.epsilon_decay_steps is not None:
         return config.epsilon_decay_steps
-    return max(10_000, config.total_steps // 2)
+    return half_run_epsilon_decay(config.total_steps)
+
+
+def half_run_epsilon_decay(total_steps: int) -> int:
+    """The default epsilon decay of a ``total_steps`` run: half of it, at least 10k steps."""
+    return max(10_000, total_steps // 2)
 
 
 def buffer_capacity(config: Config) -> int:
@@ -536,14 +541,14 @@ def _validate_hyperparameters(self: Config) -> None:
                  "reward_scale"):
         need(_finite(getattr(self, name)) and getattr(self, name) > 0, name, "must be > 0")
     capacity = buffer_capacity(self)
+    need(capacity >= self.batch_size, "buffer_size", f"must be >= batch_size ({self.batch_size}) or None "
+         "(the whole run)")
     need(1 <= self.n_envs <= min(1024, capacity // 2), "n_envs",
          f"must lie in [1, {min(1024, capacity // 2)}] (1024, and half of buffer_size={capacity} at most)")
     for name in ("batch_size", "gradient_steps", "train_freq", "target_update_freq", "n_omega", "n_intervals",
                  "n_components", "n_critics", "return_window"):
         need(getattr(self, name) >= 1, name, "must be >= 1")
     need(epsilon_decay_steps_of(self) >= 1, "epsilon_decay_steps", "must be >= 1 or None (half the run)")
-    need(capacity >= self.batch_size, "buffer_size", f"must be >= batch_size ({self.batch_size}) or None "
-         "(the whole run)")
     need(1 <= self.n_step <= 1000, "n_step", "must lie in [1, 1000] (an update runs batch_size x n_step states)")
     for name in ("learning_starts", "lb_homotopy_steps", "demo_pretrain_steps", "demo_roll_in"):
         need(getattr(self, name) >= 0, name, "must be >= 0")

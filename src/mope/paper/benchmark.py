@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from mope.config import CONSTANT_TARGET, SHORT_EXPLORATION, Config
+from mope.config import CONSTANT_TARGET, SHORT_EXPLORATION, Config, half_run_epsilon_decay
 from mope.errors import ConfigError, MopeError, suggest
 from mope.experiments.jobs import Job, run_jobs
 from mope.experiments.locks import FolderLock
@@ -112,7 +112,7 @@ METHODS: dict[str, dict[str, Any]] = {"mope": {"algo": "mope"}, "eql": {"algo": 
 #: morl-baselines' Envelope methods: name -> the settings that differ from its example's, given the run's budget.
 ENVELOPE_METHODS: dict[str, Callable[[int], dict[str, Any]]] = {
     "envelope": lambda total: {},
-    "envelope-eps-half": lambda total: {"epsilon_decay_steps": max(10_000, total // 2)},  # epsilon_decay_steps_of
+    "envelope-eps-half": lambda total: {"epsilon_decay_steps": half_run_epsilon_decay(total)},  # mope's rule
 }
 DEFAULT_METHODS = ("mope", "eql", "mope-paper", "envelope")
 #: Method names before 2026-12-06, when the late target anneal became the default: old name -> today's name.

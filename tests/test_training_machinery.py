@@ -369,6 +369,8 @@ def test_benchmark_report_covers_every_committed_piece(tmp_path: Path) -> None:
     dst = res["summary"]["deep-sea-treasure-v0"]
     assert dst["mope"]["seeds"] == 2 and dst["envelope"]["seeds"] == 1
     assert dst["mope"]["stats"]["cr"]["mean"] == pytest.approx(0.9)
+    # EUM 5 x CR at both evaluations (CR / 2, CR): the last evaluations' mean is 3.75 x CR, over seeds 3.375
+    assert dst["mope"]["stats"]["eum_last"]["mean"] == pytest.approx(3.375)
     assert dst["mope"]["reached"] == 1  # seed 0 reached CR 1 at its last evaluation, seed 1 never
     assert "## deep-sea-treasure-v0" in text and "Ratios to Envelope" in text
     assert (out / "deep-sea-treasure-v0.png").is_file()

@@ -409,3 +409,39 @@ def test_n_step_must_be_positive():
         MoPE("deep-sea-treasure-v0", n_step=0)
     with pytest.raises(mope.ConfigError, match="n_step=100000 is out of range"):
         MoPE("deep-sea-treasure-v0", n_step=100_000)
+
+
+def test_repeat_exploration_keeps_a_random_action_for_its_drawn_duration() -> None:
+    """ez-greedy: an env inside an exploration repeats its last action; one starting draws n ~ zeta(mu), capped."""
+    from mope.agent.base import MAX_REPEAT, repeat_exploration
+
+    eps = [Episode(0, np.ones(2) / 2, None, actions=[3], repeat=2), Episode(1, np.ones(2) / 2, None),
+           Episode(2, np.ones(2) / 2, None, actions=[0])]
+    actions, explored = repeat_exploration(eps, np.array([0, 2, 1]), np.array([False, True, False]), 2.0,
+                                           np.random.default_rng(7))
+    assert actions.tolist() == [3, 2, 1] and explored.tolist() == [True, True, False]
+    assert [ep.repeat for ep in eps] == [1, int(np.random.default_rng(7).zipf(2.0)) - 1, 0]
+    eps = [Episode(0, np.ones(2) / 2, None) for _ in range(200)]
+    repeat_exploration(eps, np.zeros(200, dtype=int), np.ones(200, dtype=bool), 1.01, np.random.default_rng(0))
+    assert max(ep.repeat for ep in eps) == MAX_REPEAT - 1  # zeta(1.01)'s tail is cut at an episode's length
+
+
+def test_repeated_random_actions_reach_far_treasures_of_the_mirrored_map() -> None:
+    """With every action random, straight runs reach the far treasures (16 and more, at the map's far side) far more
+    often than a one-step random walk, which mostly falls into the first treasure beside the start."""
+
+    def far_share(mu: float | None) -> float:
+        agent = MoPE("deep-sea-treasure-mirrored-v0", seed=0, epsilon_start=1.0, epsilon_end=1.0, learning_starts=10**6,
+                     hidden_sizes=(8,), n_omega=2, return_mix=0.0, epsilon_repeat_mu=mu)
+        for _ in range(6000):
+            agent.collect_step()
+        treasures = np.array([ret[0] for _, _, ret in agent.ended_episodes])
+        return float(np.mean(treasures >= 16))
+
+    plain, repeated = far_share(None), far_share(2.0)
+    assert repeated > 2 * plain, (plain, repeated)
+
+
+def test_a_bad_repeat_exponent_is_named() -> None:
+    with pytest.raises(mope.ConfigError, match="epsilon_repeat_mu=1.0 is out of range"):
+        Config(epsilon_repeat_mu=1.0)

@@ -39,8 +39,8 @@ def _metrics(run: Path) -> list[dict[str, str]]:
 
 @pytest.mark.parametrize("extra", [{}, {"return_mix": 0.0}, {"n_envs": 3, "train_freq": 2},
                                    {"n_envs": 4, "n_step": 3, "gradient_steps": 2},
-                                   {"n_envs": 2, "seen_bound_margin": 0.0}],
-                         ids=["defaults", "no-return-mix", "three-envs", "four-envs-n-step", "seen-bound"])
+                                   {"n_envs": 2, "seen_bound_margin": 0.0}, {"n_envs": 4, "epsilon_repeat_mu": 1.5}],
+                         ids=["defaults", "no-return-mix", "three-envs", "four-envs-n-step", "seen-bound", "ez-greedy"])
 def test_agent_save_load_mid_episode_continues_identically(tmp_path, extra):
     cfg = Config.for_algo("mope", total_steps=400, learning_starts=50, n_omega=8, hidden_sizes=[32, 32], seed=5,
                           **extra)
@@ -54,8 +54,10 @@ def test_agent_save_load_mid_episode_continues_identically(tmp_path, extra):
     b = MoPE.load(tmp_path / "mid.pt")
     for ep_a, ep_b in zip(a._episodes, b._episodes, strict=True):
         np.testing.assert_array_equal(np.asarray(ep_b.obs), np.asarray(ep_a.obs))
-        assert (ep_a.seed, ep_a.actions, ep_a.slots, ep_a.greedy) == (ep_b.seed, ep_b.actions, ep_b.slots,
-                                                                      ep_b.greedy)
+        assert (ep_a.seed, ep_a.actions, ep_a.slots, ep_a.greedy, ep_a.repeat) == (ep_b.seed, ep_b.actions,
+                                                                                   ep_b.slots, ep_b.greedy, ep_b.repeat)
+    if "epsilon_repeat_mu" in extra:
+        assert any(ep.repeat for ep in a._episodes), "the test must checkpoint inside a repeated random action"
     b.train(400 - a.global_step)
     assert b.global_step == ref.global_step == -(-400 // n) * n and b.episodes == ref.episodes  # whole steps of n
     assert b.episodes_started == ref.episodes_started

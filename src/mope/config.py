@@ -93,7 +93,7 @@ LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0, 
                                 "demo_batch_share": 0.0, "demo_roll_in": 0, "demo_label_weight": 0.0,
                                 "seen_bound_margin": None, "return_timeout_bootstrap": True,
                                 "reward_norm": None, "layer_norm": False, "consistent_bellman": False,
-                                "target_tau_end": None, "target_tau_anneal_from": 0.0}
+                                "target_tau_end": None, "target_tau_anneal_from": 0.0, "epsilon_repeat_mu": None}
 
 
 def check_preset(name: str) -> str:
@@ -292,6 +292,8 @@ class Config:
     epsilon_start: float = 1.0
     epsilon_end: float = 0.05
     epsilon_decay_steps: int | None = None  # None: half the run, at least 10k (epsilon_decay_steps_of)
+    #: ez-greedy (Dabney et al. 2021): exploring, keep the random action n ~ zeta(mu) steps; None: epsilon-greedy.
+    epsilon_repeat_mu: float | None = None
     #: Preferences per transition (N_omega): EQL's uniform, shared by the batch (Yang's ``weight_num``); EE's near it.
     n_omega: int = 32
 
@@ -374,7 +376,6 @@ class Config:
         self.disc_hidden = tuple(self.disc_hidden)
         self.validate()
 
-    # ------------------------------------------------------------------------------------------------------
     @property
     def algo(self) -> str:
         """Name of the variant: ``eql``, ``ee``, ``pe`` or ``mope``."""
@@ -406,7 +407,6 @@ class Config:
             d.pop(key)
         return Config.for_algo(algo, **d)
 
-    # ------------------------------------------------------------------------------------------------------
     def validate(self) -> None:
         """Raise :class:`ConfigError` naming the first out-of-range hyperparameter."""
         _validate_hyperparameters(self)
@@ -558,6 +558,8 @@ def _validate_hyperparameters(self: Config) -> None:
         need(_finite(getattr(self, name)) and getattr(self, name) >= 0, name, "must be >= 0")
     need(self.reward_norm is None or (_finite(self.reward_norm) and self.reward_norm > 0), "reward_norm",
          "must be > 0 or None")
+    need(self.epsilon_repeat_mu is None or (_finite(self.epsilon_repeat_mu) and self.epsilon_repeat_mu > 1),
+         "epsilon_repeat_mu", "must be > 1 (the exponent of a zeta distribution) or None (epsilon-greedy)")
     need(self.seen_bound_margin is None or (_finite(self.seen_bound_margin) and self.seen_bound_margin >= 0),
          "seen_bound_margin", "must be >= 0 or None")
     need(not self.consistent_bellman or (one_pass_target(self) and self.n_step == 1), "consistent_bellman",

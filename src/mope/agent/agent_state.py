@@ -119,6 +119,7 @@ class Episode:
         slots: With ``return_mix``, the buffer slots of its transitions ...
         greedy: ... and which of its actions were greedy.
         rewards: Its rewards so far.
+        repeat: With ``epsilon_repeat_mu``, the steps its current random action is still to be repeated.
     """
 
     seed: int
@@ -128,6 +129,7 @@ class Episode:
     slots: list[int] = field(default_factory=list)
     greedy: list[bool] = field(default_factory=list)
     rewards: list[np.ndarray] = field(default_factory=list)
+    repeat: int = 0
 
 
 class AgentState:
@@ -172,7 +174,8 @@ class AgentState:
                     {"seed": ep.seed, "pref": torch.as_tensor(ep.pref),
                      "actions": torch.as_tensor(ep.actions, dtype=torch.int64),
                      "slots": torch.as_tensor(ep.slots, dtype=torch.int64),
-                     "greedy": torch.as_tensor(ep.greedy, dtype=torch.bool)} for ep in a._episodes]
+                     "greedy": torch.as_tensor(ep.greedy, dtype=torch.bool), "repeat": ep.repeat}
+                    for ep in a._episodes]
             state["last_losses"] = dict(a.last_losses)
         return state
 
@@ -243,6 +246,8 @@ class AgentState:
             a._episodes = [a._restore_episode(i, int(ep["seed"]), ep["pref"].numpy(), ep["actions"].tolist(),
                                               ep["slots"].tolist(), ep["greedy"].tolist())
                            for i, ep in enumerate(data["episodes_in_progress"])]
+            for ep, saved in zip(a._episodes, data["episodes_in_progress"], strict=True):
+                ep.repeat = int(saved.get("repeat", 0))
         elif "episode" in data:  # checkpoints of one env, before n_envs: the reset seed was seed + episodes
             ep = data["episode"]
             a._episodes = [a._restore_episode(0, a.config.seed + a.episodes, ep["pref"].numpy(),

@@ -427,18 +427,20 @@ def test_repeat_exploration_keeps_a_random_action_for_its_drawn_duration() -> No
 
 
 def test_repeated_random_actions_reach_far_treasures_of_the_mirrored_map() -> None:
-    """With every action random, straight runs reach the far treasures (16 and more, at the map's far side) far more
-    often than a one-step random walk, which mostly falls into the first treasure beside the start."""
+    """With every action random, the default's straight runs (ez-greedy) reach the far treasures (16 and more, at
+    the map's far side) far more often than a one-step random walk, which mostly falls into the first treasure
+    beside the start (5x: 9.2 % of the episodes against 1.7 %)."""
+    from mope.config import PLAIN_EPSILON
 
-    def far_share(mu: float | None) -> float:
+    def far_share(**exploration: float | None) -> float:
         agent = MoPE("deep-sea-treasure-mirrored-v0", seed=0, epsilon_start=1.0, epsilon_end=1.0, learning_starts=10**6,
-                     hidden_sizes=(8,), n_omega=2, return_mix=0.0, epsilon_repeat_mu=mu)
+                     hidden_sizes=(8,), n_omega=2, return_mix=0.0, **exploration)
         for _ in range(6000):
             agent.collect_step()
         treasures = np.array([ret[0] for _, _, ret in agent.ended_episodes])
         return float(np.mean(treasures >= 16))
 
-    plain, repeated = far_share(None), far_share(2.0)
+    plain, repeated = far_share(**PLAIN_EPSILON), far_share()
     assert repeated > 2 * plain, (plain, repeated)
 
 

@@ -435,18 +435,16 @@ def test_benchmark_mope_bound_is_the_defaults_with_the_seen_return_bound(tmp_pat
 
 
 def test_benchmark_older_methods_are_the_defaults_they_ran_with(tmp_path: Path) -> None:
-    """The defaults explore with ez-greedy over half the run and keep it all in the buffer; ``mope-eps-greedy`` and
-    ``eql-eps-greedy`` differ from ``mope`` and ``eql`` by one-step epsilon-greedy only (:data:`PLAIN_EPSILON`),
-    ``mope-eps10k`` and ``eql-eps10k`` from those by epsilon's decay and the buffer (:data:`SHORT_EXPLORATION`), and
-    ``mope-const`` and ``eql-const`` from those by the late target anneal and ``reward_norm`` (``mope-bound`` alike),
-    so the runs committed before each switch keep their config under their new names, found by name beside the
-    defaults'."""
-    from mope.config import CONSTANT_TARGET, PLAIN_EPSILON, SHORT_EXPLORATION
+    """The defaults explore over half the run and keep it all in the buffer; ``mope-eps10k`` and ``eql-eps10k``
+    differ from ``mope`` and ``eql`` by those two fields only (:data:`SHORT_EXPLORATION`), and ``mope-const`` and
+    ``eql-const`` from those by the late target anneal and ``reward_norm`` (``mope-bound`` alike), so the runs
+    committed before each switch keep their config under their new names, found by name beside the defaults'."""
+    from mope.config import CONSTANT_TARGET, SHORT_EXPLORATION
     from mope.paper.benchmark import benchmark_jobs, finished_runs
 
-    assert (Config().target_tau_end, Config().target_tau_anneal_from, Config().epsilon_repeat_mu) == (1e-4, 0.5, 2.0)
-    methods = ["mope", "mope-eps-greedy", "mope-eps10k", "mope-const", "eql", "eql-eps-greedy", "eql-eps10k",
-               "eql-const", "mope-bound", "mope-bound-eps-greedy", "mope-bound-eps10k", "mope-const-bound"]
+    assert (Config().target_tau_end, Config().target_tau_anneal_from) == (1e-4, 0.5)
+    methods = ["mope", "mope-eps10k", "mope-const", "eql", "eql-eps10k", "eql-const", "mope-bound",
+               "mope-bound-eps10k", "mope-const-bound"]
     jobs = benchmark_jobs(["resource-gathering-v0"], methods, [1], quick=False, steps=None)
     by_name = {j.name.removeprefix("resource-gathering-v0-").removesuffix("-s1"): j.payload for j in jobs}
 
@@ -454,8 +452,7 @@ def test_benchmark_older_methods_are_the_defaults_they_ran_with(tmp_path: Path) 
         return {k: by_name[old][k] for k in by_name[old] if by_name[old][k] != by_name[new][k]}
 
     for now in ("mope", "eql", "mope-bound"):
-        assert changed(f"{now}-eps-greedy", now) == PLAIN_EPSILON
-        assert changed(f"{now}-eps10k", f"{now}-eps-greedy") == SHORT_EXPLORATION
+        assert changed(f"{now}-eps10k", now) == SHORT_EXPLORATION
     for short, const in (("mope-eps10k", "mope-const"), ("eql-eps10k", "eql-const"),
                          ("mope-bound-eps10k", "mope-const-bound")):
         assert changed(const, short) == {**CONSTANT_TARGET, "reward_norm": None}
@@ -463,9 +460,7 @@ def test_benchmark_older_methods_are_the_defaults_they_ran_with(tmp_path: Path) 
     assert by_name["mope-const-bound"]["seen_bound_margin"] == 0.1
     out = tmp_path / "bench"
     _fake_bench_run(out, "resource-gathering-v0", "eql-eps10k", 1, 50_000, 0.5)
-    _fake_bench_run(out, "resource-gathering-v0", "eql-eps-greedy", 1, 50_000, 0.5)
-    assert [j.name for j in finished_runs(out)] == ["resource-gathering-v0-eql-eps-greedy-s1",
-                                                    "resource-gathering-v0-eql-eps10k-s1"]
+    assert [j.name for j in finished_runs(out)] == ["resource-gathering-v0-eql-eps10k-s1"]
 
 
 def test_benchmark_envelope_eps_half_explores_as_long_as_mope(tmp_path: Path) -> None:
@@ -514,20 +509,18 @@ def test_committed_benchmark_runs_ran_their_methods_settings() -> None:
     assert checked >= 90
 
 
-def test_the_presets_and_the_robot_game_keep_the_constant_target_and_one_step_exploration() -> None:
-    """The late anneal and ez-greedy are the learner's defaults, not the presets' (their hard copies ignore the
-    anneal, and their saved runs carry the constant fields) nor the robot game's (its 5 paired seeds won 0.031 less
-    with the anneal; ez-greedy was not measured there)."""
-    from mope.config import CONSTANT_TARGET, PLAIN_EPSILON
+def test_the_presets_and_the_robot_game_keep_the_constant_target() -> None:
+    """The late anneal is the learner's default, not the presets' (their hard copies ignore it, and their saved
+    runs carry the constant fields) nor the robot game's (its 5 paired seeds won 0.031 less with it)."""
+    from mope.config import CONSTANT_TARGET
 
-    kept = {**CONSTANT_TARGET, **PLAIN_EPSILON}
     for preset in ("paper", "envelope"):
         cfg = Config.from_dict({"preset": preset})
-        assert {k: getattr(cfg, k) for k in kept} == kept
+        assert {k: getattr(cfg, k) for k in CONSTANT_TARGET} == CONSTANT_TARGET
     game = Config.from_dict({"env_id": "mope/RobotConfrontationDiscrete-v0"})
-    assert {k: getattr(game, k) for k in kept} == kept
+    assert {k: getattr(game, k) for k in CONSTANT_TARGET} == CONSTANT_TARGET
     dst = Config.from_dict({"env_id": "deep-sea-treasure-v0"})
-    assert (dst.target_tau_end, dst.target_tau_anneal_from, dst.epsilon_repeat_mu) == (1e-4, 0.5, 2.0)
+    assert (dst.target_tau_end, dst.target_tau_anneal_from) == (1e-4, 0.5)
 
 
 def test_the_cpu_description_names_the_kernels_torch_dispatches_to() -> None:

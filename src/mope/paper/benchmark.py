@@ -7,9 +7,7 @@ per environment.
 
 Methods: ``mope`` and ``eql`` (the defaults), ``mope-paper`` and ``eql-paper`` (the paper preset), ``mope-bound``
 (the defaults with the seen-return bound, ``seen_bound_margin=0.1``: a candidate default, not one yet),
-``mope-eps-greedy``, ``eql-eps-greedy`` and ``mope-bound-eps-greedy`` (the same with one-step epsilon-greedy
-exploration, :data:`mope.config.PLAIN_EPSILON`: the defaults before ez-greedy),
-``mope-eps10k``, ``eql-eps10k`` and ``mope-bound-eps10k`` (those with epsilon over 10k steps and a 20k buffer
+``mope-eps10k``, ``eql-eps10k`` and ``mope-bound-eps10k`` (the same with epsilon over 10k steps and a 20k buffer
 whatever the budget, :data:`mope.config.SHORT_EXPLORATION`: the defaults before both followed the run's length),
 ``mope-const``, ``eql-const`` and ``mope-const-bound`` (also before the late target anneal,
 :data:`mope.config.CONSTANT_TARGET`; their runs were committed before the switch), and
@@ -44,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from mope.config import CONSTANT_TARGET, PLAIN_EPSILON, SHORT_EXPLORATION, Config, half_run_epsilon_decay
+from mope.config import CONSTANT_TARGET, SHORT_EXPLORATION, Config, half_run_epsilon_decay
 from mope.errors import ConfigError, MopeError, suggest
 from mope.experiments.jobs import Job, run_jobs
 from mope.experiments.locks import FolderLock
@@ -93,26 +91,20 @@ BENCH_ENVS: dict[str, EnvBench] = {
                              "no published front or budget: 50k steps (a 13x13 grid, 3 objectives); HV and EUM "
                              "against the best any method found"),
 }
-#: Methods: name -> config settings (``envelope`` is morl-baselines' Envelope). The ``*-eps-greedy`` methods are the
-#: defaults before ez-greedy exploration (2026-12-07): a random action lasts one step. Older still, the ``*-eps10k``
-#: methods are the defaults before epsilon's decay and the replay buffer followed the run's length (2026-12-06,
-#: later): epsilon over 10k steps and a 20k buffer whatever the budget. The ``*-const`` methods are the defaults
-#: before the late target anneal (issue 33): the Polyak weight constant for the whole run, with the fixed 10k and 20k
-#: of that time and no reward normalisation (``reward_norm`` came later; it scales Deep-Sea-Treasure's rewards only,
-#: the others stay below 25).
-BEFORE_ANNEAL: dict[str, Any] = {**CONSTANT_TARGET, **SHORT_EXPLORATION, "reward_norm": None, **PLAIN_EPSILON}
+#: Methods: name -> config settings (``envelope`` is morl-baselines' Envelope). The ``*-eps10k`` methods are the
+#: defaults before epsilon's decay and the replay buffer followed the run's length (2026-12-06, later): epsilon over 10k
+#: steps and a 20k buffer whatever the budget. The ``*-const`` methods are the defaults before the late target anneal
+#: (issue 33): the Polyak weight constant for the whole run, with the fixed 10k and 20k of that time and no reward
+#: normalisation (``reward_norm`` came later; it scales Deep-Sea-Treasure's rewards only, the others stay below 25).
+BEFORE_ANNEAL: dict[str, Any] = {**CONSTANT_TARGET, **SHORT_EXPLORATION, "reward_norm": None}
 METHODS: dict[str, dict[str, Any]] = {"mope": {"algo": "mope"}, "eql": {"algo": "eql"},
                                       "mope-paper": {"algo": "mope", "preset": "paper"},
                                       "eql-paper": {"algo": "eql", "preset": "paper"},
                                       "mope-bound": {"algo": "mope", "seen_bound_margin": 0.1},
-                                      "mope-eps-greedy": {"algo": "mope", **PLAIN_EPSILON},
-                                      "eql-eps-greedy": {"algo": "eql", **PLAIN_EPSILON},
-                                      "mope-bound-eps-greedy": {"algo": "mope", "seen_bound_margin": 0.1,
-                                                                **PLAIN_EPSILON},
-                                      "mope-eps10k": {"algo": "mope", **SHORT_EXPLORATION, **PLAIN_EPSILON},
-                                      "eql-eps10k": {"algo": "eql", **SHORT_EXPLORATION, **PLAIN_EPSILON},
+                                      "mope-eps10k": {"algo": "mope", **SHORT_EXPLORATION},
+                                      "eql-eps10k": {"algo": "eql", **SHORT_EXPLORATION},
                                       "mope-bound-eps10k": {"algo": "mope", "seen_bound_margin": 0.1,
-                                                            **SHORT_EXPLORATION, **PLAIN_EPSILON},
+                                                            **SHORT_EXPLORATION},
                                       "mope-const": {"algo": "mope", **BEFORE_ANNEAL},
                                       "eql-const": {"algo": "eql", **BEFORE_ANNEAL},
                                       "mope-const-bound": {"algo": "mope", **BEFORE_ANNEAL, "seen_bound_margin": 0.1},

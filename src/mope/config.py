@@ -292,7 +292,7 @@ class Config:
     epsilon_start: float = 1.0
     epsilon_end: float = 0.05
     epsilon_decay_steps: int | None = None  # None: half the run, at least 10k (epsilon_decay_steps_of)
-    #: ez-greedy (Dabney et al. 2021): exploring, keep the random action n ~ zeta(mu) steps; None: epsilon-greedy.
+    #: ez-greedy (Dabney et al. 2021): keep a random action n ~ zeta(mu) steps, or to a wall; None: one step.
     epsilon_repeat_mu: float | None = None
     #: Preferences per transition (N_omega): EQL's uniform, shared by the batch (Yang's ``weight_num``); EE's near it.
     n_omega: int = 32

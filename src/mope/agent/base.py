@@ -52,8 +52,9 @@ def repeat_exploration(episodes: list[Episode], actions: np.ndarray, explored: n
                        rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """ez-greedy (Dabney, Ostrovski and Barreto 2021) over epsilon-greedy ``actions``: an env still inside an
     exploration takes its previous, random, action again; one that starts exploring now (``explored``, not going on)
-    keeps its random action for n ~ zeta(mu) steps in all (at most :data:`MAX_REPEAT`; the episode's end stops it).
-    Straight runs reach far cells a one-step random walk rarely does (the mirrored map's 124 treasure).
+    keeps its random action for n ~ zeta(mu) steps in all (at most :data:`MAX_REPEAT`; the episode's end stops it, and
+    so does a step that does not move: :func:`end_stalled_repeats`). Straight runs reach far cells a one-step random
+    walk rarely does (the mirrored map's 124 treasure; docs/results/ez-greedy).
 
     Returns:
         The actions and which rows took a random one; each episode's ``repeat`` is advanced in place.

@@ -456,3 +456,19 @@ def test_a_repeated_random_action_ends_when_it_does_not_move() -> None:
     obs = np.array([[0, 0], [0, 0], [0, 0]])
     end_stalled_repeats(eps, obs, np.array([[0, 0], [1, 0], [0, 0]]))
     assert [ep.repeat for ep in eps] == [0, 3, 0]
+
+
+def test_random_play_with_kept_actions_does_not_fill_the_buffer_with_self_loops() -> None:
+    """Kept random actions end at a wall: random play on Deep-Sea-Treasure stores about as many self-loops (s' = s)
+    as one-step actions do (23 %), not the 59 % a kept action that stayed against the wall gave
+    (docs/results/ez-greedy)."""
+
+    def self_loop_share(mu: float | None) -> float:
+        agent = MoPE("deep-sea-treasure-v0", seed=0, epsilon_start=1.0, epsilon_end=1.0, learning_starts=10**6,
+                     hidden_sizes=(8,), n_omega=2, return_mix=0.0, epsilon_repeat_mu=mu)
+        for _ in range(3000):
+            agent.collect_step()
+        n = len(agent.buffer)
+        return float(np.mean(np.all(agent.buffer.obs[:n] == agent.buffer.next_obs[:n], axis=1)))
+
+    assert self_loop_share(2.0) < 0.3 and self_loop_share(None) < 0.3

@@ -426,15 +426,21 @@ def test_repeat_exploration_keeps_a_random_action_for_its_drawn_duration() -> No
     assert max(ep.repeat for ep in eps) == MAX_REPEAT - 1  # zeta(1.01)'s tail is cut at an episode's length
 
 
+def random_play(env_id: str, mu: float | None, steps: int) -> MoPE:
+    """An agent that has collected ``steps`` steps with every action random (no update: learning never starts)."""
+    agent = MoPE(env_id, seed=0, epsilon_start=1.0, epsilon_end=1.0, learning_starts=10**6, hidden_sizes=(8,),
+                 n_omega=2, return_mix=0.0, epsilon_repeat_mu=mu)
+    for _ in range(steps):
+        agent.collect_step()
+    return agent
+
+
 def test_repeated_random_actions_reach_far_treasures_of_the_mirrored_map() -> None:
     """With every action random, straight runs reach the far treasures (16 and more, at the map's far side) far more
     often than a one-step random walk, which mostly falls into the first treasure beside the start."""
 
     def far_share(mu: float | None) -> float:
-        agent = MoPE("deep-sea-treasure-mirrored-v0", seed=0, epsilon_start=1.0, epsilon_end=1.0, learning_starts=10**6,
-                     hidden_sizes=(8,), n_omega=2, return_mix=0.0, epsilon_repeat_mu=mu)
-        for _ in range(6000):
-            agent.collect_step()
+        agent = random_play("deep-sea-treasure-mirrored-v0", mu, 6000)
         treasures = np.array([ret[0] for _, _, ret in agent.ended_episodes])
         return float(np.mean(treasures >= 16))
 
@@ -464,10 +470,7 @@ def test_random_play_with_kept_actions_does_not_fill_the_buffer_with_self_loops(
     (docs/results/ez-greedy)."""
 
     def self_loop_share(mu: float | None) -> float:
-        agent = MoPE("deep-sea-treasure-v0", seed=0, epsilon_start=1.0, epsilon_end=1.0, learning_starts=10**6,
-                     hidden_sizes=(8,), n_omega=2, return_mix=0.0, epsilon_repeat_mu=mu)
-        for _ in range(3000):
-            agent.collect_step()
+        agent = random_play("deep-sea-treasure-v0", mu, 3000)
         n = len(agent.buffer)
         return float(np.mean(np.all(agent.buffer.obs[:n] == agent.buffer.next_obs[:n], axis=1)))
 

@@ -39,7 +39,8 @@ def _metrics(run: Path) -> list[dict[str, str]]:
 
 @pytest.mark.parametrize("extra", [{}, {"return_mix": 0.0}, {"n_envs": 3, "train_freq": 2},
                                    {"n_envs": 4, "n_step": 3, "gradient_steps": 2},
-                                   {"n_envs": 2, "seen_bound_margin": 0.0}, {"n_envs": 4, "epsilon_repeat_mu": 1.5}],
+                                   {"n_envs": 2, "seen_bound_margin": 0.0, "epsilon_repeat_mu": None},
+                                   {"n_envs": 4, "epsilon_repeat_mu": 1.5}],
                          ids=["defaults", "no-return-mix", "three-envs", "four-envs-n-step", "seen-bound", "ez-greedy"])
 def test_agent_save_load_mid_episode_continues_identically(tmp_path, extra):
     cfg = Config.for_algo("mope", total_steps=400, learning_starts=50, n_omega=8, hidden_sizes=[32, 32], seed=5,
@@ -56,7 +57,7 @@ def test_agent_save_load_mid_episode_continues_identically(tmp_path, extra):
         np.testing.assert_array_equal(np.asarray(ep_b.obs), np.asarray(ep_a.obs))
         assert (ep_a.seed, ep_a.actions, ep_a.slots, ep_a.greedy, ep_a.repeat) == (ep_b.seed, ep_b.actions,
                                                                                    ep_b.slots, ep_b.greedy, ep_b.repeat)
-    if "epsilon_repeat_mu" in extra:
+    if extra.get("epsilon_repeat_mu"):
         assert any(ep.repeat for ep in a._episodes), "the test must checkpoint inside a repeated random action"
     b.train(400 - a.global_step)
     assert b.global_step == ref.global_step == -(-400 // n) * n and b.episodes == ref.episodes  # whole steps of n
@@ -64,7 +65,7 @@ def test_agent_save_load_mid_episode_continues_identically(tmp_path, extra):
     for p_ref, p_b in zip(ref.q_net.parameters(), b.q_net.parameters(), strict=True):
         assert np.array_equal(p_ref.detach().numpy(), p_b.detach().numpy())
     np.testing.assert_array_equal(ref.pref_sampler.counts, b.pref_sampler.counts)
-    if "seen_bound_margin" in extra:  # the returns seen, from episodes that ended on either side of the checkpoint
+    if cfg.seen_bound_margin is not None:  # the returns seen, from episodes that ended on either side of the checkpoint
         np.testing.assert_array_equal(ref.seen_returns, b.seen_returns)
         np.testing.assert_array_equal(ref._q_high_t.numpy(), b._q_high_t.numpy())
     if extra.get("return_mix") != 0.0:  # the greedy-tail returns of the episodes that spanned the checkpoint too

@@ -47,8 +47,9 @@ def test_the_clamp_follows_the_returns_of_ended_episodes():
     assert bool((y <= a._q_high_t + 1e-6).all())
 
 
-def test_off_by_default_and_the_clamp_is_the_reward_spaces():
-    a = MoPE("deep-sea-treasure-v0", Config.for_algo("mope", **SMALL))
+def test_on_by_default_and_off_the_clamp_is_the_reward_spaces():
+    assert Config().seen_bound_margin == 0.1  # the default since 2026-12-07 (issue 33)
+    a = MoPE("deep-sea-treasure-v0", Config.for_algo("mope", seen_bound_margin=None, **SMALL))
     a.train(300)
     assert a.seen_returns is None and a.episodes > 0  # episodes ended, and none tightened the clamp
     np.testing.assert_allclose(a._q_high_t.numpy(), a.q_high)

@@ -301,7 +301,8 @@ def _rows(folder: Path) -> list[dict[str, str]]:
 @pytest.mark.parametrize(("args", "needle"), [
     (["--envs", "deep-sea-treasur-v0"], "unknown environment 'deep-sea-treasur-v0'"),
     (["--methods", "mopee"], "unknown method 'mopee' (did you mean 'mope'?)"),
-    (["--methods", "mope-late-bound"], "method 'mope-late-bound' was renamed 'mope-bound'"),
+    (["--methods", "mope-late-bound"], "method 'mope-late-bound' was renamed 'mope-eps-greedy'"),
+    (["--methods", "mope-bound"], "method 'mope-bound' was renamed 'mope-eps-greedy' when the seen-return bound"),
     (["--methods", "eql-late"], "method 'eql-late' was renamed 'eql'"),
     (["--envs", "mope/RobotConfrontation-v0"], "continuous action space"),
     (["--steps", "0"], "--steps 0 is out of range"),
@@ -415,44 +416,54 @@ def test_readme_benchmark_table_is_the_committed_results() -> None:
     assert block == (root / "docs/results/benchmark/readme_table.md").read_text()
 
 
-def test_benchmark_mope_bound_is_the_defaults_with_the_seen_return_bound(tmp_path: Path) -> None:
-    """The candidate default as a benchmark method: its jobs' configs, and its committed runs found by name."""
+def test_benchmark_mope_eps_greedy_is_the_defaults_with_one_step_exploration(tmp_path: Path) -> None:
+    """The defaults bound the targets by the returns seen and explore with ez-greedy; ``mope-eps-greedy`` is them with
+    one-step epsilon-greedy (the runs named ``mope-bound`` before 2026-12-07): its jobs' configs, and its committed
+    runs found by name."""
     from mope.paper.benchmark import benchmark_jobs, finished_runs, summarise
 
-    jobs = benchmark_jobs(["four-room-v0"], ["mope", "mope-bound"], [0], quick=False, steps=None)
+    jobs = benchmark_jobs(["four-room-v0"], ["mope", "mope-eps-greedy"], [0], quick=False, steps=None)
     by_name = {j.name: j.payload for j in jobs}
-    assert by_name["four-room-v0-mope-bound-s0"]["seen_bound_margin"] == 0.1
-    assert by_name["four-room-v0-mope-s0"]["seen_bound_margin"] is None
-    assert by_name["four-room-v0-mope-bound-s0"]["eval_prefs"] == by_name["four-room-v0-mope-s0"]["eval_prefs"]
+    assert by_name["four-room-v0-mope-s0"]["seen_bound_margin"] == 0.1
+    assert by_name["four-room-v0-mope-s0"]["epsilon_repeat_mu"] == 2.0
+    assert by_name["four-room-v0-mope-eps-greedy-s0"]["seen_bound_margin"] == 0.1
+    assert by_name["four-room-v0-mope-eps-greedy-s0"]["epsilon_repeat_mu"] is None
     out = tmp_path / "bench"
-    _fake_bench_run(out, "four-room-v0", "mope-bound", 0, 50_000, 0.5)
+    _fake_bench_run(out, "four-room-v0", "mope-eps-greedy", 0, 50_000, 0.5)
     _fake_bench_run(out, "four-room-v0", "mope", 0, 50_000, 0.25)
     found = finished_runs(out)
-    assert sorted(j.name for j in found) == ["four-room-v0-mope-bound-s0", "four-room-v0-mope-s0"]
+    assert sorted(j.name for j in found) == ["four-room-v0-mope-eps-greedy-s0", "four-room-v0-mope-s0"]
     table = summarise(out, found)["four-room-v0"]
-    assert table["mope-bound"]["stats"]["eum"]["mean"] == pytest.approx(2.5)
+    assert table["mope-eps-greedy"]["stats"]["eum"]["mean"] == pytest.approx(2.5)
     assert table["mope"]["stats"]["eum"]["mean"] == pytest.approx(1.25)
 
 
 def test_benchmark_older_methods_are_the_defaults_they_ran_with(tmp_path: Path) -> None:
-    """The defaults explore over half the run and keep it all in the buffer; ``mope-eps10k`` and ``eql-eps10k``
-    differ from ``mope`` and ``eql`` by those two fields only (:data:`SHORT_EXPLORATION`), and ``mope-const`` and
-    ``eql-const`` from those by the late target anneal and ``reward_norm`` (``mope-bound`` alike), so the runs
-    committed before each switch keep their config under their new names, found by name beside the defaults'."""
-    from mope.config import CONSTANT_TARGET, SHORT_EXPLORATION
+    """Each older method differs from the next newer one by the fields of one switch, so the runs committed before
+    each switch keep their config under their new names, found by name beside the defaults': ``mope-eps-greedy``
+    from ``mope`` by one-step exploration (:data:`PLAIN_EPSILON`), ``*-eps-greedy-unbounded`` from those by the
+    seen-return bound (:data:`UNBOUNDED`), ``*-eps10k`` from those by epsilon's decay and the buffer
+    (:data:`SHORT_EXPLORATION`), and ``*-const`` from those by the late target anneal and ``reward_norm``."""
+    from mope.config import CONSTANT_TARGET, PLAIN_EPSILON, SHORT_EXPLORATION, UNBOUNDED
     from mope.paper.benchmark import benchmark_jobs, finished_runs
 
-    assert (Config().target_tau_end, Config().target_tau_anneal_from) == (1e-4, 0.5)
-    methods = ["mope", "mope-eps10k", "mope-const", "eql", "eql-eps10k", "eql-const", "mope-bound",
-               "mope-bound-eps10k", "mope-const-bound"]
+    c = Config()
+    assert (c.target_tau_end, c.target_tau_anneal_from, c.epsilon_repeat_mu, c.seen_bound_margin) == (
+        1e-4, 0.5, 2.0, 0.1)
+    methods = ["mope", "mope-eps-greedy", "mope-eps-greedy-unbounded", "mope-eps10k", "mope-const", "eql",
+               "eql-eps-greedy-unbounded", "eql-eps10k", "eql-const", "mope-bound-eps10k", "mope-const-bound"]
     jobs = benchmark_jobs(["resource-gathering-v0"], methods, [1], quick=False, steps=None)
     by_name = {j.name.removeprefix("resource-gathering-v0-").removesuffix("-s1"): j.payload for j in jobs}
 
     def changed(old: str, new: str) -> dict:
         return {k: by_name[old][k] for k in by_name[old] if by_name[old][k] != by_name[new][k]}
 
-    for now in ("mope", "eql", "mope-bound"):
-        assert changed(f"{now}-eps10k", now) == SHORT_EXPLORATION
+    assert changed("mope-eps-greedy", "mope") == PLAIN_EPSILON
+    assert changed("mope-eps-greedy-unbounded", "mope-eps-greedy") == UNBOUNDED
+    assert changed("eql-eps-greedy-unbounded", "eql") == {**PLAIN_EPSILON, **UNBOUNDED}
+    for now in ("mope-eps-greedy-unbounded", "eql-eps-greedy-unbounded"):
+        assert changed(now.replace("eps-greedy-unbounded", "eps10k"), now) == SHORT_EXPLORATION
+    assert changed("mope-bound-eps10k", "mope-eps-greedy") == SHORT_EXPLORATION
     for short, const in (("mope-eps10k", "mope-const"), ("eql-eps10k", "eql-const"),
                          ("mope-bound-eps10k", "mope-const-bound")):
         assert changed(const, short) == {**CONSTANT_TARGET, "reward_norm": None}
@@ -460,7 +471,9 @@ def test_benchmark_older_methods_are_the_defaults_they_ran_with(tmp_path: Path) 
     assert by_name["mope-const-bound"]["seen_bound_margin"] == 0.1
     out = tmp_path / "bench"
     _fake_bench_run(out, "resource-gathering-v0", "eql-eps10k", 1, 50_000, 0.5)
-    assert [j.name for j in finished_runs(out)] == ["resource-gathering-v0-eql-eps10k-s1"]
+    _fake_bench_run(out, "resource-gathering-v0", "eql-eps-greedy-unbounded", 1, 50_000, 0.5)
+    assert [j.name for j in finished_runs(out)] == ["resource-gathering-v0-eql-eps-greedy-unbounded-s1",
+                                                    "resource-gathering-v0-eql-eps10k-s1"]
 
 
 def test_benchmark_envelope_eps_half_explores_as_long_as_mope(tmp_path: Path) -> None:
@@ -509,18 +522,21 @@ def test_committed_benchmark_runs_ran_their_methods_settings() -> None:
     assert checked >= 90
 
 
-def test_the_presets_and_the_robot_game_keep_the_constant_target() -> None:
-    """The late anneal is the learner's default, not the presets' (their hard copies ignore it, and their saved
-    runs carry the constant fields) nor the robot game's (its 5 paired seeds won 0.031 less with it)."""
-    from mope.config import CONSTANT_TARGET
+def test_the_presets_and_the_robot_game_keep_the_constant_target_one_step_exploration_and_no_bound() -> None:
+    """The late anneal, ez-greedy and the seen-return bound are the learner's defaults, not the presets' (their hard
+    copies ignore the anneal, and their saved runs carry the older fields) nor the robot game's (its 5 paired seeds
+    won 0.031 less with the anneal; ez-greedy and the bound were not measured there)."""
+    from mope.config import CONSTANT_TARGET, PLAIN_EPSILON, UNBOUNDED
 
+    kept = {**CONSTANT_TARGET, **PLAIN_EPSILON, **UNBOUNDED}
     for preset in ("paper", "envelope"):
         cfg = Config.from_dict({"preset": preset})
-        assert {k: getattr(cfg, k) for k in CONSTANT_TARGET} == CONSTANT_TARGET
+        assert {k: getattr(cfg, k) for k in kept} == kept
     game = Config.from_dict({"env_id": "mope/RobotConfrontationDiscrete-v0"})
-    assert {k: getattr(game, k) for k in CONSTANT_TARGET} == CONSTANT_TARGET
+    assert {k: getattr(game, k) for k in kept} == kept
     dst = Config.from_dict({"env_id": "deep-sea-treasure-v0"})
-    assert (dst.target_tau_end, dst.target_tau_anneal_from) == (1e-4, 0.5)
+    assert (dst.target_tau_end, dst.target_tau_anneal_from, dst.epsilon_repeat_mu, dst.seen_bound_margin) == (
+        1e-4, 0.5, 2.0, 0.1)
 
 
 def test_the_cpu_description_names_the_kernels_torch_dispatches_to() -> None:

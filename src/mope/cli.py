@@ -378,8 +378,8 @@ def benchmark(
     envs: Annotated[str | None, typer.Option(help="Comma-separated environments [default: all of the benchmark's]")
                     ] = None,
     methods: Annotated[str | None, typer.Option(
-        help="Comma-separated: mope, eql, mope-paper, eql-paper, mope-bound, mope-const, eql-const, mope-const-bound, "
-             "envelope "
+        help="Comma-separated: mope, eql, mope-paper, eql-paper, envelope, or an older default (mope-eps-greedy, "
+             "mope-eps-greedy-unbounded, ...: mope.paper.benchmark.METHODS) "
              "\\[default: mope,eql,mope-paper, and envelope when morl-baselines is installed]")] = None,
     seeds: Annotated[str, typer.Option(help="Seeds per environment and method: N (0..N-1), a range 5-9 or a list "
                                             "0,5,7.")] = "5",

@@ -49,6 +49,12 @@ CONSTANT_TARGET: dict[str, Any] = {"target_tau_end": None, "target_tau_anneal_fr
 #: keep them.
 SHORT_EXPLORATION: dict[str, Any] = {"epsilon_decay_steps": 10_000, "buffer_size": 20_000}
 
+#: One-step epsilon-greedy and targets clamped by the reward space only: mope's defaults before ez-greedy and the
+#: seen-return bound (issue 33, 2026-12-07). The presets, the robot game and ``mope benchmark``'s older methods keep
+#: them.
+PLAIN_EPSILON: dict[str, Any] = {"epsilon_repeat_mu": None}
+UNBOUNDED: dict[str, Any] = {"seen_bound_margin": None}
+
 #: Named sets of defaults: ``Config.from_dict({"preset": name, ...})``, ``mope train --preset name``.
 #: ``mope`` is the dataclass defaults (see docs/design.md, "The learner"); ``paper`` is the paper's literal settings
 #: as mope 0.1 ran them (the defaults before the learning study, double Q-learning and target clipping included);
@@ -60,13 +66,15 @@ PRESETS: dict[str, dict[str, Any]] = {
               "learning_rate": 1e-3, "learning_rate_end": None, "batch_size": 32, "target_tau": None,
               "target_update_freq": 100, "max_grad_norm": 10.0, "n_omega": 64, "relabel_broad": 0.0,
               "envelope_prefs": "relabel", "return_mix": 0.0, "n_step": 1, "epsilon_decay_steps": 10_000,
-              "buffer_size": 20_000, "reward_norm": None, **CONSTANT_TARGET},
+              "buffer_size": 20_000, "reward_norm": None, **CONSTANT_TARGET, **PLAIN_EPSILON,
+              **UNBOUNDED},
     "envelope": {"q_head": "conditioned", "obs_encoding": "scale", "hidden_sizes": [256, 256, 256, 256],
                  "learning_rate": 3e-4, "learning_rate_end": None, "batch_size": 64, "n_omega": 4,
                  "target_tau": None, "target_update_freq": 1000, "max_grad_norm": 0.1, "lb_homotopy_steps": 10_000,
                  "relabel_broad": 0.0, "envelope_prefs": "relabel", "clip_targets": False, "learning_starts": 100,
                  "per_alpha": 0.6, "return_mix": 0.0, "n_step": 1, "epsilon_decay_steps": 10_000,
-                 "buffer_size": 20_000, "reward_norm": None, **CONSTANT_TARGET},
+                 "buffer_size": 20_000, "reward_norm": None, **CONSTANT_TARGET, **PLAIN_EPSILON,
+                 **UNBOUNDED},
 }
 
 #: Per-environment defaults: ``mope train --env ID`` and ``MoPE(ID)`` use them for every setting not given (by a
@@ -75,13 +83,15 @@ PRESETS: dict[str, dict[str, Any]] = {
 #: 4 env steps, beat 8 envs on both seeds of an 80k-step probe, at about 1.8x the wall time; 5,000 DQfD
 #: pre-training updates on the demonstrations beat none on wins, exits and EU over 10 seeds of 200k steps). The game
 #: keeps the constant target: on 5 paired seeds the late anneal won 0.031 less at w_catch 0.8-1, past the 0.03 its
-#: rule allowed (docs/results/game-study/late-target-amd).
+#: rule allowed (docs/results/game-study/late-target-amd). It keeps one-step epsilon-greedy and the reward space's
+#: clamp too: ez-greedy and the seen-return bound were not measured on it.
 ENV_DEFAULTS: dict[str, dict[str, Any]] = {
     "mope/RobotConfrontationDiscrete-v0": {"n_envs": 4, "buffer_size": 100_000, "epsilon_decay_steps": 10_000,
                                            "demos": "scripted",
                                            "demo_episodes": 50, "demo_batch_share": 0.25,
                                            "demo_pretrain_steps": 5_000,
-                                           "eval_every": 20_000, "eval_prefs": 200, **CONSTANT_TARGET},
+                                           "eval_every": 20_000, "eval_prefs": 200, **CONSTANT_TARGET,
+                                           **PLAIN_EPSILON, **UNBOUNDED},
 }
 
 #: Fields added after mope 0.2.0, with the values that reproduce the runs saved before them: a saved config (it has
@@ -288,12 +298,12 @@ class Config:
     #: Clamp the targets y to the returns the reward bounds allow (not in the paper; see docs/design.md), and with
     #: kappa >= 0 the upper clamp to at most the largest return seen plus kappa x the range seen (None: not).
     clip_targets: bool = True
-    seen_bound_margin: float | None = None
+    seen_bound_margin: float | None = 0.1
     epsilon_start: float = 1.0
     epsilon_end: float = 0.05
     epsilon_decay_steps: int | None = None  # None: half the run, at least 10k (epsilon_decay_steps_of)
     #: ez-greedy (Dabney et al. 2021): keep a random action n ~ zeta(mu) steps, or to a wall; None: one step.
-    epsilon_repeat_mu: float | None = None
+    epsilon_repeat_mu: float | None = 2.0
     #: Preferences per transition (N_omega): EQL's uniform, shared by the batch (Yang's ``weight_num``); EE's near it.
     n_omega: int = 32
 

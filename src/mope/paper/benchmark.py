@@ -5,9 +5,11 @@ One command trains and evaluates a grid of (environment, method, seed) in one ru
 own; a re-run keeps the finished jobs and resumes the interrupted ones), then writes one table and one figure
 per environment.
 
-Methods: ``mope`` and ``eql`` (the defaults), ``mope-paper`` and ``eql-paper`` (the paper preset), ``mope-bound``
-(the defaults with the seen-return bound, ``seen_bound_margin=0.1``: a candidate default, not one yet),
-``mope-eps10k``, ``eql-eps10k`` and ``mope-bound-eps10k`` (the same with epsilon over 10k steps and a 20k buffer
+Methods: ``mope`` and ``eql`` (the defaults), ``mope-paper`` and ``eql-paper`` (the paper preset),
+``mope-eps-greedy`` (the defaults with one-step epsilon-greedy, :data:`mope.config.PLAIN_EPSILON`; named
+``mope-bound`` before 2026-12-07), ``mope-eps-greedy-unbounded`` and ``eql-eps-greedy-unbounded`` (also without the
+seen-return bound, :data:`mope.config.UNBOUNDED`: the defaults before 2026-12-07),
+``mope-eps10k``, ``eql-eps10k`` and ``mope-bound-eps10k`` (those with epsilon over 10k steps and a 20k buffer
 whatever the budget, :data:`mope.config.SHORT_EXPLORATION`: the defaults before both followed the run's length),
 ``mope-const``, ``eql-const`` and ``mope-const-bound`` (also before the late target anneal,
 :data:`mope.config.CONSTANT_TARGET`; their runs were committed before the switch), and
@@ -42,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from mope.config import CONSTANT_TARGET, SHORT_EXPLORATION, Config, half_run_epsilon_decay
+from mope.config import CONSTANT_TARGET, PLAIN_EPSILON, SHORT_EXPLORATION, UNBOUNDED, Config, half_run_epsilon_decay
 from mope.errors import ConfigError, MopeError, suggest
 from mope.experiments.jobs import Job, run_jobs
 from mope.experiments.locks import FolderLock
@@ -91,20 +93,25 @@ BENCH_ENVS: dict[str, EnvBench] = {
                              "no published front or budget: 50k steps (a 13x13 grid, 3 objectives); HV and EUM "
                              "against the best any method found"),
 }
-#: Methods: name -> config settings (``envelope`` is morl-baselines' Envelope). The ``*-eps10k`` methods are the
-#: defaults before epsilon's decay and the replay buffer followed the run's length (2026-12-06, later): epsilon over 10k
-#: steps and a 20k buffer whatever the budget. The ``*-const`` methods are the defaults before the late target anneal
-#: (issue 33): the Polyak weight constant for the whole run, with the fixed 10k and 20k of that time and no reward
-#: normalisation (``reward_norm`` came later; it scales Deep-Sea-Treasure's rewards only, the others stay below 25).
-BEFORE_ANNEAL: dict[str, Any] = {**CONSTANT_TARGET, **SHORT_EXPLORATION, "reward_norm": None}
+#: Methods: name -> config settings (``envelope`` is morl-baselines' Envelope). The ``*-eps-greedy*`` methods are the
+#: defaults before ez-greedy exploration and, ``*-unbounded``, the seen-return bound (2026-12-07). Older still, the
+#: ``*-eps10k`` methods are the defaults before epsilon's decay and the replay buffer followed the run's length
+#: (2026-12-06, later): epsilon over 10k steps and a 20k buffer whatever the budget. The ``*-const`` methods are the
+#: defaults before the late target anneal (issue 33): the Polyak weight constant for the whole run, with the fixed 10k
+#: and 20k of that time and no reward normalisation (``reward_norm`` came later; it scales Deep-Sea-Treasure's rewards
+#: only, the others stay below 25).
+BEFORE_EZ_BOUND: dict[str, Any] = {**PLAIN_EPSILON, **UNBOUNDED}
+BEFORE_ANNEAL: dict[str, Any] = {**CONSTANT_TARGET, **SHORT_EXPLORATION, "reward_norm": None, **BEFORE_EZ_BOUND}
 METHODS: dict[str, dict[str, Any]] = {"mope": {"algo": "mope"}, "eql": {"algo": "eql"},
                                       "mope-paper": {"algo": "mope", "preset": "paper"},
                                       "eql-paper": {"algo": "eql", "preset": "paper"},
-                                      "mope-bound": {"algo": "mope", "seen_bound_margin": 0.1},
-                                      "mope-eps10k": {"algo": "mope", **SHORT_EXPLORATION},
-                                      "eql-eps10k": {"algo": "eql", **SHORT_EXPLORATION},
+                                      "mope-eps-greedy": {"algo": "mope", **PLAIN_EPSILON},
+                                      "mope-eps-greedy-unbounded": {"algo": "mope", **BEFORE_EZ_BOUND},
+                                      "eql-eps-greedy-unbounded": {"algo": "eql", **BEFORE_EZ_BOUND},
+                                      "mope-eps10k": {"algo": "mope", **SHORT_EXPLORATION, **BEFORE_EZ_BOUND},
+                                      "eql-eps10k": {"algo": "eql", **SHORT_EXPLORATION, **BEFORE_EZ_BOUND},
                                       "mope-bound-eps10k": {"algo": "mope", "seen_bound_margin": 0.1,
-                                                            **SHORT_EXPLORATION},
+                                                            **SHORT_EXPLORATION, **PLAIN_EPSILON},
                                       "mope-const": {"algo": "mope", **BEFORE_ANNEAL},
                                       "eql-const": {"algo": "eql", **BEFORE_ANNEAL},
                                       "mope-const-bound": {"algo": "mope", **BEFORE_ANNEAL, "seen_bound_margin": 0.1},
@@ -115,8 +122,13 @@ ENVELOPE_METHODS: dict[str, Callable[[int], dict[str, Any]]] = {
     "envelope-eps-half": lambda total: {"epsilon_decay_steps": half_run_epsilon_decay(total)},  # mope's rule
 }
 DEFAULT_METHODS = ("mope", "eql", "mope-paper", "envelope")
-#: Method names before 2026-12-06, when the late target anneal became the default: old name -> today's name.
-RENAMED_METHODS = {"mope-late": "mope", "eql-late": "eql", "mope-late-bound": "mope-bound"}
+#: Renamed methods: old name -> (today's name, when and why).
+RENAMED_METHODS: dict[str, tuple[str, str]] = {
+    **{old: (new, "when the late target anneal became the default (2026-12-06); the '*-const' methods keep the "
+                  "constant target") for old, new in (("mope-late", "mope"), ("eql-late", "eql"),
+                                                      ("mope-late-bound", "mope-eps-greedy"))},
+    "mope-bound": ("mope-eps-greedy", "when the seen-return bound and ez-greedy became the defaults (2026-12-07): "
+                                      "the bound with one-step epsilon-greedy")}
 
 
 def check_choices(envs: list[str], methods: list[str], seeds: int | str | Sequence[int], steps: int | None
@@ -133,8 +145,7 @@ def check_choices(envs: list[str], methods: list[str], seeds: int | str | Sequen
                               " (or add it to mope.paper.benchmark.BENCH_ENVS)")
     for m in methods:
         if m in RENAMED_METHODS:
-            raise ConfigError(f"method '{m}' was renamed '{RENAMED_METHODS[m]}' when the late target anneal became "
-                              "the default (2026-12-06); the '*-const' methods keep the constant target")
+            raise ConfigError(f"method '{m}' was renamed '{RENAMED_METHODS[m][0]}' {RENAMED_METHODS[m][1]}")
         if m not in METHODS:
             raise ConfigError(f"unknown method '{m}'{suggest(m, METHODS)}; choose from {', '.join(METHODS)}")
     seed_values = seed_list(seeds)

@@ -301,9 +301,9 @@ def _rows(folder: Path) -> list[dict[str, str]]:
 @pytest.mark.parametrize(("args", "needle"), [
     (["--envs", "deep-sea-treasur-v0"], "unknown environment 'deep-sea-treasur-v0'"),
     (["--methods", "mopee"], "unknown method 'mopee' (did you mean 'mope'?)"),
-    (["--methods", "mope-late-bound"], "method 'mope-late-bound' was renamed 'mope-eps-greedy'"),
+    (["--methods", "mope-late-bound"], "method 'mope-late-bound' was renamed 'mope-bound-eps10k'"),
     (["--methods", "mope-bound"], "method 'mope-bound' was renamed 'mope-eps-greedy' when the seen-return bound"),
-    (["--methods", "eql-late"], "method 'eql-late' was renamed 'eql'"),
+    (["--methods", "eql-late"], "method 'eql-late' was renamed 'eql-eps10k' (the late target anneal"),
     (["--envs", "mope/RobotConfrontation-v0"], "continuous action space"),
     (["--steps", "0"], "--steps 0 is out of range"),
     (["--seeds", "0"], "--seeds=0 is out of range"),
@@ -445,8 +445,9 @@ def test_benchmark_older_methods_are_the_defaults_they_ran_with(tmp_path: Path) 
     seen-return bound (:data:`UNBOUNDED`), ``*-eps10k`` from those by epsilon's decay and the buffer
     (:data:`SHORT_EXPLORATION`), and ``*-const`` from those by the late target anneal and ``reward_norm``."""
     from mope.config import CONSTANT_TARGET, PLAIN_EPSILON, SHORT_EXPLORATION, UNBOUNDED
-    from mope.paper.benchmark import benchmark_jobs, finished_runs
+    from mope.paper.benchmark import METHODS, RENAMED_METHODS, benchmark_jobs, finished_runs
 
+    assert all(new in METHODS for new, _ in RENAMED_METHODS.values())  # every old name points at a method
     c = Config()
     assert (c.target_tau_end, c.target_tau_anneal_from, c.epsilon_repeat_mu, c.seen_bound_margin) == (
         1e-4, 0.5, 2.0, 0.1)

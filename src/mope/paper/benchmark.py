@@ -124,9 +124,9 @@ ENVELOPE_METHODS: dict[str, Callable[[int], dict[str, Any]]] = {
 DEFAULT_METHODS = ("mope", "eql", "mope-paper", "envelope")
 #: Renamed methods: old name -> (today's name, when and why).
 RENAMED_METHODS: dict[str, tuple[str, str]] = {
-    **{old: (new, "when the late target anneal became the default (2026-12-06); the '*-const' methods keep the "
-                  "constant target") for old, new in (("mope-late", "mope"), ("eql-late", "eql"),
-                                                      ("mope-late-bound", "mope-eps-greedy"))},
+    **{old: (new, "(the late target anneal with epsilon over 10k steps and a 20k buffer, as on 2026-12-06); the "
+                  "'*-const' methods keep the constant target") for old, new in (
+        ("mope-late", "mope-eps10k"), ("eql-late", "eql-eps10k"), ("mope-late-bound", "mope-bound-eps10k"))},
     "mope-bound": ("mope-eps-greedy", "when the seen-return bound and ez-greedy became the defaults (2026-12-07): "
                                       "the bound with one-step epsilon-greedy")}
 

@@ -78,9 +78,11 @@ def test_every_envs_episode_preference_is_drawn_by_the_sampler() -> None:
 
 
 def test_one_env_steps_through_act_like_a_hand_written_loop() -> None:
-    """n_envs = 1: the stored stream is that of calling act() and env.step() one step at a time (today's path)."""
-    agent = MoPE("deep-sea-treasure-v0", **SMALL)
-    twin = MoPE("deep-sea-treasure-v0", **SMALL)
+    """n_envs = 1: the stored stream is that of calling act() and env.step() one step at a time (today's path), with
+    one-step epsilon-greedy: ez-greedy's kept actions live in collection, not in act() (tests/test_agent.py)."""
+    one_step = {**SMALL, "epsilon_repeat_mu": None}
+    agent = MoPE("deep-sea-treasure-v0", **one_step)
+    twin = MoPE("deep-sea-treasure-v0", **one_step)
     env = twin.env
     obs, pref, seed = None, None, SMALL["seed"]
     for step in range(300):

@@ -108,3 +108,99 @@ def test_seabed_variant_ends_on_the_rock() -> None:
 def test_unknown_dynamics_are_refused() -> None:
     with pytest.raises(EnvironmentError_, match="no ground truth for environment 'four-room-v0'"):
         tabular_model(mo_gym.make("four-room-v0"))
+
+
+# ------------------------------------------------------------------------------------------------------------
+# resource-gathering: a stochastic model (each enemy cell kills with probability 0.1)
+# ------------------------------------------------------------------------------------------------------------
+def rollout_mean(env: object, model: TabularModel, pi: np.ndarray, episodes: int, gamma: float = 0.99) -> np.ndarray:
+    """Monte Carlo mean discounted return of a tabular policy ``pi (S,)`` from the env's start."""
+    index = {tuple(o): i for i, o in enumerate(model.obs)}
+    total = np.zeros(3)
+    for e in range(episodes):
+        obs, _ = env.reset(seed=e)
+        disc = 1.0
+        for _ in range(100):
+            obs, r, term, trunc, _ = env.step(int(pi[index[tuple(obs)]]))
+            total += disc * np.asarray(r)
+            disc *= gamma
+            if term or trunc:
+                break
+    return total / episodes
+
+
+def test_resource_gathering_model_agrees_with_the_environment_on_a_risky_route() -> None:
+    """Straight up through the enemy E1 to the gold and straight back: killed with probability 0.1 on each of the
+    two visits. The model's exact expected return and 4,000 sampled episodes agree (within 4 standard errors)."""
+    from mope.evaluation.diagnose import policy_returns
+
+    env = mo_gym.make("resource-gathering-v0")
+    model = tabular_model(env)
+    assert model.prob is not None and model.n_states == 100 and tuple(model.obs[model.start]) == (4, 2, 0, 0)
+    pi = np.where(model.obs[:, 2] == 1, 1, 0)  # up until the gold is carried, then down
+    exact = policy_returns(model, pi[None], 0.99)[0, model.start]
+    g = 0.99
+    killed = 0.1 * g**2 + 0.9 * 0.1 * g**4  # E1 on the way up (step 3), then on the way back (step 5)
+    np.testing.assert_allclose(exact, [-killed, 0.81 * g**7, 0.0], atol=1e-12)
+    mc = rollout_mean(env, model, pi, 4000)
+    assert np.all(np.abs(mc - exact) <= 4 * 0.5 / np.sqrt(4000)), (mc, exact)
+
+
+def test_resource_gathering_exact_front_and_the_published_one() -> None:
+    """The exact discounted CCS at gamma 0.99 is the three safe routes: the gem (10 steps, reward at step 9), the
+    gold (12 steps) and both (18 steps, around both enemies). MO-Gymnasium's published front has neither the last
+    nor the right exponents, so its optimal EUM is 0.045 too low; the evaluator uses the exact one."""
+    from mope import metrics
+    from mope.evaluation.diagnose import WRONG_PUBLISHED_FRONTS, exact_front, reference_front
+    from mope.evaluation.evaluator import Evaluator
+
+    env = mo_gym.make("resource-gathering-v0")
+    g = 0.99
+    want = np.array([[0.0, 0.0, g**9], [0.0, g**11, 0.0], [0.0, g**17, g**17]])
+    front = exact_front(env, g)
+    np.testing.assert_allclose(front[np.lexsort(front.T)], want[np.lexsort(want.T)], atol=1e-12)
+    assert "ResourceGathering" in WRONG_PUBLISHED_FRONTS
+    ev = Evaluator(env, "resource-gathering-v0")
+    np.testing.assert_array_equal(ev.front, reference_front(env, g))
+    exact_eum = metrics.optimal_utility(ev.eum_prefs, ev.front).mean()
+    published = metrics.optimal_utility(ev.eum_prefs, np.asarray(env.unwrapped.pareto_front(gamma=g))).mean()
+    assert exact_eum == pytest.approx(0.5707, abs=1e-4) and exact_eum - published > 0.04
+    # Deep-Sea-Treasure's published front is right (the DST test above): it is still the one used
+    dst = mo_gym.make("deep-sea-treasure-v0")
+    np.testing.assert_array_equal(reference_front(dst, g), np.asarray(dst.unwrapped.pareto_front(gamma=g)))
+
+
+class GreedyTable:
+    """An agent whose Q-vectors make a fixed tabular policy greedy and believe ``belief`` of it at every state."""
+
+    def __init__(self, model: TabularModel, pi: np.ndarray, belief: np.ndarray) -> None:
+        self.model, self.pi, self.belief = model, pi, belief
+
+    def q_values(self, obs: np.ndarray, prefs: np.ndarray) -> np.ndarray:
+        index = {tuple(o): i for i, o in enumerate(self.model.obs)}
+        q = np.full((len(obs), 4, 3), -10.0)
+        for row, o in enumerate(obs):
+            q[row, self.pi[index[tuple(o)]]] = self.belief
+        return q
+
+
+def test_greedy_policy_metrics_measure_the_utility_given_up_and_the_optimism() -> None:
+    """The exact agent gives up nothing and believes what it gets; an agent that takes the risky gold route while
+    believing it safe gives up exactly the difference, and its belief gap is what the enemy costs it."""
+    env = mo_gym.make("resource-gathering-v0")
+    model = tabular_model(env)
+    w = np.array([[0.5, 0.5, 0.0], [0.2, 0.8, 0.0]])
+    truth = value_iteration(model, w, 0.99)
+    d = diagnose(Exact(truth, model), env, gamma=0.99, prefs=w)
+    assert abs(d["greedy_regret_mean"]) < 1e-9 and d["greedy_utility_share"] == pytest.approx(1.0)
+    assert abs(d["belief_gap_mean"]) < 1e-9 and d["path_error"] == 0
+    g = 0.99
+    risky = np.where(model.obs[:, 2] == 1, 1, 0)
+    got = np.array([-(0.1 * g**2 + 0.09 * g**4), 0.81 * g**7, 0.0])
+    believed = np.array([0.0, g**7, 0.0])  # the lucky outcome: never killed
+    d = diagnose(GreedyTable(model, risky, believed), env, gamma=0.99, prefs=w)
+    best = truth.v[:, model.start]
+    np.testing.assert_allclose(d["greedy_regret_mean"], np.mean(best - w @ got), atol=1e-12)
+    np.testing.assert_allclose(d["belief_gap_mean"], np.mean(w @ (believed - got)), atol=1e-12)
+    assert d["greedy_utility_share"] == pytest.approx((w @ got).sum() / best.sum())
+    assert d["path_error"] > 0  # the risky route's first step is not optimal for either preference

@@ -271,7 +271,8 @@ def diagnose(
     as_json: Annotated[bool, typer.Option("--json", help="Print the result as JSON.")] = False,
     device: Annotated[str | None, typer.Option(help="cpu, cuda or auto (default: the run's).")] = None,
 ) -> None:
-    """Measure a trained agent against the exact Q* (environments with known dynamics: Deep-Sea-Treasure)."""
+    """Measure a trained agent against the exact Q* (environments with known dynamics: Deep-Sea-Treasure and
+    resource-gathering)."""
     from mope.evaluation.diagnose import diagnose as run_diagnosis
     from mope.experiments.runs import load_agent, resolve_checkpoint
 

@@ -18,7 +18,8 @@ import gymnasium as gym
 import numpy as np
 
 from mope import metrics
-from mope.envs import default_ref_point, known_front, make_batched
+from mope.envs import default_ref_point, make_batched
+from mope.evaluation.diagnose import reference_front
 from mope.preferences import equally_spaced, sample_simplex, validate_preference
 
 DEFAULT_MAX_STEPS = 1000
@@ -177,6 +178,10 @@ def outcome_shares(outcomes: np.ndarray | None) -> dict[str, float]:
     return {key: float(np.mean(outcomes == name)) for key, name in OUTCOME_KEYS.items()}
 
 
+#: Equally spaced preferences of EUM (100, as in morl-baselines).
+N_EUM_PREFS = 100
+
+
 class GroundTruthCheck:
     """Exact Q* of a known environment at 101 equally spaced preferences, and the diagnostic against it."""
 
@@ -194,7 +199,7 @@ class GroundTruthCheck:
             model = tabular_model(env)
         except EnvironmentError_:
             return None
-        m = model.reward.shape[2]
+        m = model.n_objectives
         return cls(model, value_iteration(model, equally_spaced(m, n_prefs), gamma))
 
     def measure(self, agent: Any) -> dict[str, float]:
@@ -223,7 +228,8 @@ class Evaluator:
     """
 
     def __init__(self, env: gym.Env, env_id: str, gamma: float = 0.99, n_prefs: int = 2000, seed: int = 0,
-                 max_steps: int | None = None, ref_point: np.ndarray | None = None, n_eum_prefs: int = 100) -> None:
+                 max_steps: int | None = None, ref_point: np.ndarray | None = None, n_eum_prefs: int = N_EUM_PREFS
+                 ) -> None:
         check_eval_prefs(n_prefs)
         self.env = env
         self.gamma = gamma
@@ -231,7 +237,7 @@ class Evaluator:
         self.max_steps = max_steps or (env.spec.max_episode_steps if env.spec else None) or DEFAULT_MAX_STEPS
         self.prefs = sample_simplex(n_prefs, self.m, np.random.default_rng(seed + 1_000_003))
         self.eum_prefs = equally_spaced(self.m, n_eum_prefs)
-        self.front = known_front(env, gamma)
+        self.front = reference_front(env, gamma)  # the published front, or the exact one where it is wrong
         #: Close deterministic loops in closed form (see :func:`solutions`); False steps them to the time limit.
         self.close_loops = True
         self.ref_point = (np.asarray(ref_point, dtype=np.float64) if ref_point is not None

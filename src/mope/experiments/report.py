@@ -382,13 +382,14 @@ def _read_solutions(folder: Path) -> np.ndarray | None:
 
 
 def _true_ccs(config: dict[str, Any]) -> np.ndarray | None:
-    """The environment's discounted CCS, if it publishes a front (None when it does not or cannot be made)."""
+    """The environment's discounted CCS, if mope has a front for it (None when it does not or cannot be made)."""
     try:
-        from mope.envs import known_front, make_env
+        from mope.envs import make_env
+        from mope.evaluation.diagnose import reference_front
         from mope.metrics import convex_coverage_set
 
         env = make_env(config["env_id"])
-        front = known_front(env, float(config.get("gamma", 0.99)))
+        front = reference_front(env, float(config.get("gamma", 0.99)))
         env.close()
         return None if front is None else convex_coverage_set(front)
     except Exception:  # noqa: BLE001 - the plot then shows the solutions alone

@@ -277,6 +277,26 @@ def eum_of_last_evaluations(rows: list[dict[str, float]], k: int = LAST_EVALS) -
     return float(np.mean([r["eum"] for r in rows[-k:]])) if rows else math.nan
 
 
+def reference_optimal_eum(env_id: str, gamma: float) -> float:
+    """The optimal EUM of the evaluator's equally spaced preferences against mope's reference front
+    (:func:`mope.evaluation.diagnose.reference_front`: the published one, or the exact one where the published
+    one is wrong); NaN without a front."""
+    from mope.envs import make_env
+    from mope.evaluation.diagnose import reference_front
+    from mope.evaluation.evaluator import N_EUM_PREFS
+    from mope.metrics import optimal_utility
+    from mope.preferences import equally_spaced
+
+    env = make_env(env_id)
+    try:
+        front = reference_front(env, gamma)
+        if front is None:
+            return math.nan
+        return float(np.mean(optimal_utility(equally_spaced(front.shape[1], N_EUM_PREFS), front)))
+    finally:
+        env.close()
+
+
 def summarise(out: Path, jobs: list[Job]) -> dict[str, dict[str, dict[str, Any]]]:
     """Per environment, per method: the metrics' values over seeds, aggregated (mean, bootstrap CI)."""
     from mope.experiments.stats import aggregate
@@ -292,7 +312,12 @@ def summarise(out: Path, jobs: list[Job]) -> dict[str, dict[str, dict[str, Any]]
         known = any(np.isfinite(r["final"].get("cr", math.nan)) for rs in by_method.values() for r in rs)
         best_eum = max(r["final"]["eum"] for rs in by_method.values() for r in rs)
         optimal = [r["final"].get("eum_optimal", math.nan) for rs in by_method.values() for r in rs]
-        optimal_eum = float(optimal[0]) if optimal and np.isfinite(optimal[0]) else math.nan
+        recorded = float(optimal[0]) if optimal and np.isfinite(optimal[0]) else math.nan
+        gamma = float(next(j.payload.get("gamma", 0.99) for j in jobs if j.payload["env_id"] == env_id))
+        optimal_eum = reference_optimal_eum(env_id, gamma) if np.isfinite(recorded) else math.nan
+        for rs in by_method.values():  # the gap to today's reference front, whatever front a run recorded
+            for r in rs:
+                r["final"]["eum_gap"] = optimal_eum - r["final"]["eum"]
         # the target: 95 % of the way from 0 to the optimal EUM where the front is known, else to the best final
         # EUM any method reached (EUM may be negative: 5 % of its size below it)
         ref = optimal_eum if np.isfinite(optimal_eum) else best_eum
@@ -313,7 +338,8 @@ def summarise(out: Path, jobs: list[Job]) -> dict[str, dict[str, dict[str, Any]]
                                      "reached": int(np.sum(np.isfinite(values["steps_to_target"])))}
         budget = int(next(j.payload["total_steps"] for j in jobs if j.payload["env_id"] == env_id))
         table[env_id]["_meta"] = {"known_front": known, "best_eum": best_eum, "steps": budget,
-                                  "stochastic": stochastic, "optimal_eum": optimal_eum, "target_eum": target}
+                                  "stochastic": stochastic, "optimal_eum": optimal_eum, "target_eum": target,
+                                  "recorded_optimal_eum": recorded}
     return table
 
 
@@ -362,6 +388,25 @@ def readme_table(summary: dict[str, dict[str, dict[str, Any]]]) -> str:
                            "seeds that reached 95 % of the optimal EUM"], rows) + "\n"
 
 
+def _target_note(meta: dict[str, Any]) -> list[str]:
+    """The sentences above an environment's table: its target, which optimum it is of, and what stochastic
+    dynamics leave out."""
+    target = meta.get("target_eum", math.nan)
+    note = [f"Target EUM: {target:.3f}" + (f" (95 % of the optimal {meta['optimal_eum']:.3f})"
+                                            if math.isfinite(meta.get("optimal_eum", math.nan)) else
+                                            " (95 % of the best final EUM)") + "."] if math.isfinite(target) else []
+    recorded = meta.get("recorded_optimal_eum", math.nan)
+    if math.isfinite(recorded) and abs(recorded - meta["optimal_eum"]) > 1e-6:
+        note.append(f"The runs' metrics.csv recorded the optimum {recorded:.3f}, of the environment's published "
+                    "front; the optimum and the EUM gap here are of the exact front "
+                    "(mope.evaluation.diagnose.WRONG_PUBLISHED_FRONTS says why).")
+    if meta.get("stochastic", False):
+        note.append("Stochastic dynamics: each preference is evaluated with one episode, so EUM (an unbiased "
+                    "estimate of the expected utility) is reported, and CR, the optimal share and HV, which "
+                    "would compare single outcomes with a front of expected returns, are not.")
+    return note
+
+
 def render(summary: dict[str, dict[str, dict[str, Any]]], quick: bool, info: dict[str, Any]) -> str:
     """The markdown report: one table per environment, ratios to Envelope where it ran."""
     from mope.experiments.plots import markdown_table
@@ -394,14 +439,7 @@ def render(summary: dict[str, dict[str, dict[str, Any]]], quick: bool, info: dic
                          f"{s['reached']}/{s['seeds']}"])
         budget = f"{meta['steps']:,} steps per run" + ("" if meta["steps"] == b.steps else
                                                         f" (the full benchmark's: {b.steps:,})")
-        target = meta.get("target_eum", math.nan)
-        note = [f"Target EUM: {target:.3f}" + (f" (95 % of the optimal {meta['optimal_eum']:.3f})"
-                                                if math.isfinite(meta.get("optimal_eum", math.nan)) else
-                                                " (95 % of the best final EUM)") + "."] if math.isfinite(target) else []
-        if stochastic:
-            note.append("Stochastic dynamics: each preference is evaluated with one episode, so EUM (an unbiased "
-                        "estimate of the expected utility) is reported, and CR, the optimal share and HV, which "
-                        "would compare single outcomes with a front of expected returns, are not.")
+        note = _target_note(meta)
         lines += ["", f"## {env_id}", "", f"Budget: {budget}; the full budget's source: {b.source}.", "",
                   *([" ".join(note), ""] if note else []), markdown_table(header, rows)]
         if env_ratio is not None:

@@ -195,6 +195,19 @@ def test_load_yaml(tmp_path: Path) -> None:
     assert c.hidden_sizes == (32, 32) and c.total_steps == 500
 
 
+def test_yaml_reads_exponents_without_a_dot_as_numbers(tmp_path: Path) -> None:
+    """PyYAML (YAML 1.1) reads ``3e-4`` as a string, so a config file with ``learning_rate: 3e-4`` used to stop
+    with "is not a number"; mope reads YAML 1.2's floats. A quoted value stays a string."""
+    p = tmp_path / "run.yaml"
+    p.write_text("learning_rate: 3e-4\nlearning_rate_end: 3E-05\nsigma_omega: 4e-2\ntotal_steps: 1_000\n")
+    c = Config.load(p)
+    assert c.learning_rate == 3e-4 and c.learning_rate_end == 3e-5 and c.sigma_omega == 0.04
+    assert c.total_steps == 1000 and isinstance(c.total_steps, int)
+    p.write_text('learning_rate: "3e-4"\n')
+    with pytest.raises(ConfigError, match="learning_rate='3e-4' is not a number"):
+        Config.load(p)
+
+
 def test_load_yml_suffix_and_empty_yaml(tmp_path: Path) -> None:
     p = tmp_path / "run.yml"
     p.write_text("gamma: 0.95\n")

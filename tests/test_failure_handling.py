@@ -598,3 +598,28 @@ def test_a_finished_trial_loses_a_stale_error_file(tmp_path: Path, finished_run:
     records = run_jobs([Job("trial", "train", tiny().to_dict())], out, progress=False)
     assert records["trial"]["action"] == "skipped"
     assert not (out / "trial" / "error.txt").exists()
+
+
+def test_diagnose_measures_a_resource_gathering_run_and_refuses_an_unknown_environment(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """`mope diagnose` on a (tiny) resource-gathering run: the exact metrics, each in its range; on four-room,
+    whose dynamics mope does not know, one error line and exit code 2."""
+    rg = tiny(env_id="resource-gathering-v0", checkpoint_every=60)
+    path = tmp_path / "rg.yaml"
+    path.write_text(json.dumps(rg.to_dict()))
+    code, _, err = cli(capsys, monkeypatch, "train", "--config", str(path), "--out", str(tmp_path / "rg"),
+                       "--no-progress")
+    assert code == 0, err
+    code, out, err = cli(capsys, monkeypatch, "diagnose", str(tmp_path / "rg"), "--json", "--prefs", "20")
+    assert code == 0, err
+    d = json.loads(out)
+    assert 0 <= d["path_error"] <= 1 and 0 <= d["greedy_utility_share"] <= 1 + 1e-9, d
+    assert d["greedy_regret_mean"] >= -1e-9 and d["n_prefs"] == 15, d  # 15: the Das-Dennis lattice under 20
+    four = tiny(env_id="four-room-v0", checkpoint_every=60)
+    path.write_text(json.dumps(four.to_dict()))
+    code, _, err = cli(capsys, monkeypatch, "train", "--config", str(path), "--out", str(tmp_path / "four"),
+                       "--no-progress")
+    assert code == 0, err
+    code, _, err = cli(capsys, monkeypatch, "diagnose", str(tmp_path / "four"))
+    assert code == 2
+    one_error_line(err, "no ground truth for environment 'four-room-v0'")

@@ -16,6 +16,7 @@ import dataclasses
 import functools
 import json
 import math
+import re
 import types
 import typing
 from collections.abc import Callable, Sequence
@@ -623,13 +624,26 @@ class FileTooBigError(ValueError):
     """A settings file expands to too many values (a parse problem of :func:`read_config_file`)."""
 
 
+#: YAML 1.2's floats, which PyYAML's YAML 1.1 resolver misses without a dot: ``3e-4`` is a string there.
+YAML_FLOAT = re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+    |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
+    |\.[0-9_]+(?:[eE][-+]?[0-9]+)?
+    |[-+]?\.(?:inf|Inf|INF)
+    |\.(?:nan|NaN|NAN))$""", re.X)
+
+
 def load_yaml(text: str) -> Any:
-    """``yaml.safe_load(text)``, refusing a document that aliases expand beyond :data:`MAX_FILE_VALUES` values (a
-    "billion laughs" file: a few hundred bytes of nested aliases that would take minutes and gigabytes to format)
-    or that holds itself (a recursive alias)."""
+    """``yaml.safe_load(text)`` with YAML 1.2's floats (``learning_rate: 3e-4`` is a number, not the string PyYAML
+    reads), refusing a document that aliases expand beyond :data:`MAX_FILE_VALUES` values (a "billion laughs"
+    file: a few hundred bytes of nested aliases that would take minutes and gigabytes to format) or that holds
+    itself (a recursive alias)."""
     import yaml
 
-    data = yaml.safe_load(text)
+    class Loader(yaml.SafeLoader):
+        pass
+
+    Loader.add_implicit_resolver("tag:yaml.org,2002:float", YAML_FLOAT, list("-+0123456789."))
+    data = yaml.load(text, Loader=Loader)  # noqa: S506 - a SafeLoader
     check_size(data)
     return data
 

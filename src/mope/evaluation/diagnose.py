@@ -15,7 +15,7 @@ against them:
 * ``abs_error_mean``: mean ``|w^T Q(s, a, w) - Q*(s, a, w)|`` over reachable states and all actions;
 * ``greedy_regret_mean`` (:func:`diagnose` only, not the training evaluations): ``V*(s0, w) - w^T V^pi(s0)``,
   the exact expected utility the greedy policy pi gives up at the start (:func:`policy_returns`), and
-  ``greedy_utility_share``, ``sum_w w^T V^pi(s0) / sum_w V*(s0, w)`` (where the optimal values are positive:
+  ``greedy_utility_share``, ``sum_w w^T V^pi(s0) / sum_w V*(s0, w)`` (where no optimal value is negative:
   resource-gathering; NaN on Deep-Sea-Treasure, whose time cost makes them negative);
 * ``belief_gap_mean``: ``max_a w^T Q(s0, a, w) - w^T V^pi(s0)``, what the agent expects of its own greedy
   policy beyond what it gets (its optimism about itself; on a stochastic environment, about luck).
@@ -408,7 +408,8 @@ def greedy_policy_metrics(q: np.ndarray, model: TabularModel, truth: GroundTruth
     best = truth.v[:, model.start]
     return {
         "greedy_regret_mean": float(np.mean(best - got)),
-        "greedy_utility_share": float(got.sum() / best.sum()) if np.all(best > 0) else float("nan"),
+        "greedy_utility_share": (float(got.sum() / best.sum()) if np.all(best >= 0) and best.sum() > 0
+                                 else float("nan")),
         "belief_gap_mean": float(np.mean(scal[:, model.start].max(axis=1) - got)),
     }
 

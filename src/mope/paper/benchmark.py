@@ -106,9 +106,6 @@ METHODS: dict[str, dict[str, Any]] = {"mope": {"algo": "mope"}, "eql": {"algo": 
                                       "mope-paper": {"algo": "mope", "preset": "paper"},
                                       "eql-paper": {"algo": "eql", "preset": "paper"},
                                       "mope-eps-greedy": {"algo": "mope", **PLAIN_EPSILON},
-                                      # the convex head without its component loss (a probe of resource-gathering's
-                                      # optimism, 2026-12-07): only eq. 4 trains the components
-                                      "mope-no-component-loss": {"algo": "mope", "component_loss_weight": 0.0},
                                       "mope-eps-greedy-unbounded": {"algo": "mope", **BEFORE_EZ_BOUND},
                                       "eql-eps-greedy-unbounded": {"algo": "eql", **BEFORE_EZ_BOUND},
                                       "mope-eps10k": {"algo": "mope", **SHORT_EXPLORATION, **BEFORE_EZ_BOUND},

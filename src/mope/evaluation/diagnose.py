@@ -284,11 +284,19 @@ def exact_front(env: gym.Env, gamma: float, n_prefs: int = 1000) -> np.ndarray:
     return convex_coverage_set(np.unique(starts.round(12), axis=0))
 
 
+#: :func:`reference_front`'s exact fronts, by (environment class, its map, gamma): each is computed once per process.
+_EXACT_FRONTS: dict[tuple[str, str, float], np.ndarray] = {}
+
+
 def reference_front(env: gym.Env, gamma: float) -> np.ndarray | None:
     """The front mope evaluates against: the environment's published one (:func:`mope.envs.known_front`), or for an
     environment of :data:`WRONG_PUBLISHED_FRONTS` the exact one (:func:`exact_front`); ``None`` without either."""
-    if type(env.unwrapped).__name__ in WRONG_PUBLISHED_FRONTS and 0 < gamma < 1:
-        return exact_front(env, gamma)
+    kind = type(env.unwrapped).__name__
+    if kind in WRONG_PUBLISHED_FRONTS and 0 < gamma < 1:
+        key = (kind, repr(getattr(env.unwrapped, "map", None)), float(gamma))
+        if key not in _EXACT_FRONTS:
+            _EXACT_FRONTS[key] = exact_front(env, gamma)
+        return _EXACT_FRONTS[key].copy()
     return known_front(env, gamma)
 
 

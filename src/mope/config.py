@@ -38,6 +38,8 @@ ALGOS: dict[str, tuple[bool, bool]] = {
 ENVELOPE_PREFS = ("relabel", "batch", "both", "own")
 ENCODINGS = ("scale", "onehot", "joint", "auto")
 Q_HEADS = ("conditioned", "convex")
+#: Forms of the scalarised loss L^B (Config.lb_loss).
+LB_LOSSES = ("squared", "abs")
 DEVICES = ("cpu", "cuda", "auto")
 
 
@@ -67,8 +69,8 @@ PRESETS: dict[str, dict[str, Any]] = {
               "learning_rate": 1e-3, "learning_rate_end": None, "batch_size": 32, "target_tau": None,
               "target_update_freq": 100, "max_grad_norm": 10.0, "n_omega": 64, "relabel_broad": 0.0,
               "envelope_prefs": "relabel", "return_mix": 0.0, "n_step": 1, "epsilon_decay_steps": 10_000,
-              "buffer_size": 20_000, "reward_norm": None, **CONSTANT_TARGET, **PLAIN_EPSILON,
-              **UNBOUNDED},
+              "buffer_size": 20_000, "reward_norm": None, "lb_loss": "abs", **CONSTANT_TARGET,
+              **PLAIN_EPSILON, **UNBOUNDED},
     "envelope": {"q_head": "conditioned", "obs_encoding": "scale", "hidden_sizes": [256, 256, 256, 256],
                  "learning_rate": 3e-4, "learning_rate_end": None, "batch_size": 64, "n_omega": 4,
                  "target_tau": None, "target_update_freq": 1000, "max_grad_norm": 0.1, "lb_homotopy_steps": 10_000,
@@ -104,7 +106,8 @@ LATER_FIELDS: dict[str, Any] = {"n_critics": 1, "component_anchor_weight": 0.0, 
                                 "demo_batch_share": 0.0, "demo_roll_in": 0, "demo_label_weight": 0.0,
                                 "seen_bound_margin": None, "return_timeout_bootstrap": True,
                                 "reward_norm": None, "layer_norm": False, "consistent_bellman": False,
-                                "target_tau_end": None, "target_tau_anneal_from": 0.0, "epsilon_repeat_mu": None}
+                                "target_tau_end": None, "target_tau_anneal_from": 0.0, "epsilon_repeat_mu": None,
+                                "lb_loss": "abs"}
 
 
 def check_preset(name: str) -> str:
@@ -291,6 +294,10 @@ class Config:
     return_timeout_bootstrap: bool = True
     n_step: int = 1  # stored rewards per target row, cut at its first non-greedy action (watkins_n_step_targets)
     lb_weight: float = 1.0  # of the auxiliary loss: L = L^A + lb_weight * L^B (the paper uses 1)
+    #: L^B's form: "squared", (w^T y - w^T Q)^2 as Yang et al.'s and morl-baselines' code (learns the expected
+    #: return), or "abs", |w^T y - w^T Q| as eq. 4 is written (learns the median: under random transitions the
+    #: common outcome's return, docs/results/lb-loss).
+    lb_loss: str = "squared"
     #: Homotopy of Yang et al.: the weight of L^B rises linearly from 0 to lb_weight over this many steps (0: off).
     lb_homotopy_steps: int = 0
     max_grad_norm: float | None = 1.0
@@ -535,6 +542,7 @@ def _validate_hyperparameters(self: Config) -> None:
     need(self.total_steps >= 1, "total_steps", "must be >= 1")
     need(self.obs_encoding in ENCODINGS, "obs_encoding", f"choose one of {', '.join(ENCODINGS)}")
     need(self.q_head in Q_HEADS, "q_head", f"choose one of {', '.join(Q_HEADS)}")
+    need(self.lb_loss in LB_LOSSES, "lb_loss", f"choose one of {', '.join(LB_LOSSES)}")
     need(self.learning_rate_end is None or (_finite(self.learning_rate_end) and self.learning_rate_end > 0),
          "learning_rate_end", "must be > 0 or None")
     for name in ("target_tau", "target_tau_end"):

@@ -510,10 +510,10 @@ class MoPE(BaseAgent):
             margin = losses.large_margin_loss(scalar, rows.actions, c.demo_margin, rows.mask)
         if c.lb_homotopy_steps:  # Yang et al.'s homotopy: (1 - lambda) L^A + lambda L^B, lambda rising to lb_weight
             lam = c.lb_weight * min(1.0, self.global_step / c.lb_homotopy_steps)
-            _, l_a, l_b = losses.eql_loss(q, y, w)
+            _, l_a, l_b = losses.eql_loss(q, y, w, lb_loss=c.lb_loss)
             loss_rows = (1.0 - lam) * l_a + lam * l_b
         else:
-            loss_rows, l_a, l_b = losses.eql_loss(q, y, w, c.lb_weight)
+            loss_rows, l_a, l_b = losses.eql_loss(q, y, w, c.lb_weight, c.lb_loss)
         parts = {"loss_a": l_a, "loss_b": l_b}
         if comp_loss is not None:
             loss_rows = loss_rows + losses.weighted(c.component_loss_weight, comp_loss)

@@ -174,25 +174,31 @@ def taken_action_q(q_all: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
     return q_all.gather(2, actions.view(b, 1, 1, 1).expand(b, n, 1, m)).squeeze(2)
 
 
-def eql_loss(q: torch.Tensor, y: torch.Tensor, prefs: torch.Tensor, lb_weight: float = 1.0
+def eql_loss(q: torch.Tensor, y: torch.Tensor, prefs: torch.Tensor, lb_weight: float = 1.0, lb_loss: str = "squared"
              ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Per-transition EQL loss of eq. 4: L = L^A + L^B, each averaged over the transition's N preferences.
 
-    ``L^A = ||y - Q(s, a, w)||_2^2`` (vector regression) and ``L^B = |w^T y - w^T Q(s, a, w)|`` (the auxiliary
-    scalarised loss).
+    ``L^A = ||y - Q(s, a, w)||_2^2`` (vector regression) and the auxiliary scalarised loss
+    ``L^B = (w^T y - w^T Q(s, a, w))^2`` (``lb_loss="squared"``, as Yang et al.'s and morl-baselines' code) or
+    ``|w^T y - w^T Q(s, a, w)|`` (``"abs"``, as eq. 4 is written). With random transitions the targets of one
+    (s, a, w) scatter over the outcomes: the squared form is minimised by their mean, the expected return Q is
+    defined as, the absolute one by their median, which is the common outcome's return (a 10 % risk of a penalty
+    learns as no risk at all).
 
     Args:
         q: ``(B, N, m)`` Q(s, a, w) of the taken action.
         y: ``(B, N, m)`` targets (no gradient).
         prefs: ``(B, N, m)`` row preferences.
         lb_weight: Weight of L^B (1 in the paper).
+        lb_loss: ``"squared"`` or ``"abs"``.
 
     Returns:
         ``(loss, l_a, l_b)``, each of shape ``(B,)``.
     """
     diff = y - q
     l_a = objective_sum(diff * diff).mean(1)
-    l_b = objective_sum(prefs * diff).abs().mean(1)
+    scalar = objective_sum(prefs * diff)
+    l_b = (scalar * scalar if lb_loss == "squared" else scalar.abs()).mean(1)
     return l_a + weighted(lb_weight, l_b), l_a, l_b
 
 

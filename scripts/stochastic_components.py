@@ -7,7 +7,7 @@ the policy's expected utility (40 episodes each) against the optimum from MO-Gym
 
 Usage::
 
-    .venv/bin/python scripts/stochastic_components.py docs/results/benchmark/resource-gathering-v0-mope-s0
+    .venv/bin/python scripts/stochastic_components.py docs/results/benchmark/resource-gathering-v0-mope-lb-abs-s0
 """
 
 from __future__ import annotations

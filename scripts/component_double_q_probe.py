@@ -30,7 +30,8 @@ def double_components(v_online: torch.Tensor, v_target: torch.Tensor, prefs: tor
 
 if __name__ == "__main__":
     arm, seed, out = sys.argv[1], int(sys.argv[2]), Path(sys.argv[3])
-    base = Path(__file__).resolve().parents[1] / "docs/results/benchmark/resource-gathering-v0-mope-lb-abs-s0/config.json"
+    bench = Path(__file__).resolve().parents[1] / "docs/results/benchmark"
+    base = bench / "resource-gathering-v0-mope-lb-abs-s0/config.json"
     cfg = Config.from_dict({**json.loads(base.read_text()), "seed": seed})
     if arm == "double-components":
         ConvexQNetwork.double_q_values = staticmethod(double_components)

@@ -87,14 +87,14 @@ PRESETS: dict[str, dict[str, Any]] = {
 #: pre-training updates on the demonstrations beat none on wins, exits and EU over 10 seeds of 200k steps). The game
 #: keeps the constant target: on 5 paired seeds the late anneal won 0.031 less at w_catch 0.8-1, past the 0.03 its
 #: rule allowed (docs/results/game-study/late-target-amd). It keeps one-step epsilon-greedy and the reward space's
-#: clamp too: ez-greedy and the seen-return bound were not measured on it.
+#: clamp too, and the absolute L^B: ez-greedy, the seen-return bound and the squared L^B were not measured on it.
 ENV_DEFAULTS: dict[str, dict[str, Any]] = {
     "mope/RobotConfrontationDiscrete-v0": {"n_envs": 4, "buffer_size": 100_000, "epsilon_decay_steps": 10_000,
                                            "demos": "scripted",
                                            "demo_episodes": 50, "demo_batch_share": 0.25,
                                            "demo_pretrain_steps": 5_000,
-                                           "eval_every": 20_000, "eval_prefs": 200, **CONSTANT_TARGET,
-                                           **PLAIN_EPSILON, **UNBOUNDED},
+                                           "eval_every": 20_000, "eval_prefs": 200, "lb_loss": "abs",
+                                           **CONSTANT_TARGET, **PLAIN_EPSILON, **UNBOUNDED},
 }
 
 #: Fields added after mope 0.2.0, with the values that reproduce the runs saved before them: a saved config (it has
@@ -250,8 +250,7 @@ class Config:
     env_id: str = "deep-sea-treasure-v0"
     seed: int = 0
     total_steps: int = 20_000
-    #: Episode time limit; ``None`` uses the limit the environment registers (100 on Deep-Sea-Treasure).
-    max_episode_steps: int | None = None
+    max_episode_steps: int | None = None  # episode time limit; None: the environment's (100 on Deep-Sea-Treasure)
     #: How observations enter the networks: "scale" (a bounded Box to [0, 1]), "onehot" (each coordinate of an
     #: integer Box one-hot), "joint" (a small integer Box's whole cell one-hot), "auto" (onehot if small, else scale).
     obs_encoding: str = "auto"
@@ -273,14 +272,12 @@ class Config:
     batch_size: int = 128
     buffer_size: int | None = None  # None: the whole run, at least 20k and at most 1M (buffer_capacity)
     learning_starts: int = 200
-    #: Training envs stepped together, one forward pass acting for all (SB3's ``n_envs``).
-    n_envs: int = 1
+    n_envs: int = 1  # training envs stepped together, one forward pass acting for all (SB3's ``n_envs``)
     #: Collection steps (each ``n_envs`` env steps) per update round (SB3's ``train_freq``) ...
     train_freq: int = 1
     #: ... and gradient updates per round (SB3's ``gradient_steps``), each followed by the Polyak step.
     gradient_steps: int = 1
-    #: Hard target-network copy every this many environment steps (Yang et al. use 100).
-    target_update_freq: int = 100
+    target_update_freq: int = 100  # hard target-network copy every this many env steps (Yang et al. use 100)
     #: Polyak weight of the target network (None: the hard copy above), on a cosine to target_tau_end (None: constant)
     #: from the fraction target_tau_anneal_from of the run: late updates no longer move the policy (results/target-tau).
     target_tau: float | None = 0.005
@@ -293,10 +290,9 @@ class Config:
     return_window: int = 2_000
     return_timeout_bootstrap: bool = True
     n_step: int = 1  # stored rewards per target row, cut at its first non-greedy action (watkins_n_step_targets)
-    lb_weight: float = 1.0  # of the auxiliary loss: L = L^A + lb_weight * L^B (the paper uses 1)
-    #: L^B's form: "squared", (w^T y - w^T Q)^2 as Yang et al.'s and morl-baselines' code (learns the expected
-    #: return), or "abs", |w^T y - w^T Q| as eq. 4 is written (learns the median: under random transitions the
-    #: common outcome's return, docs/results/lb-loss).
+    #: Weight and form of the auxiliary loss, L = L^A + lb_weight * L^B: "squared" (w^T y - w^T Q)^2 as Yang et al.'s
+    #: code (learns the mean), or "abs" as eq. 4 is written (the median: a random risk as none, docs/results/lb-loss)
+    lb_weight: float = 1.0
     lb_loss: str = "squared"
     #: Homotopy of Yang et al.: the weight of L^B rises linearly from 0 to lb_weight over this many steps (0: off).
     lb_homotopy_steps: int = 0

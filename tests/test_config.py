@@ -132,6 +132,7 @@ def test_for_algo_contradiction() -> None:
         ({"target_tau_end": float("nan")}, "target_tau_end", "nan"),
         ({"target_tau_anneal_from": 1.0}, "target_tau_anneal_from", "1.0"),
         ({"consistent_bellman": True, "q_head": "conditioned"}, "consistent_bellman", "True"),
+        ({"lb_loss": "huber"}, "lb_loss", "'huber'"),
     ],
 )
 def test_out_of_range_raises_config_error_naming_field_and_value(changes: dict, field: str, value: str) -> None:

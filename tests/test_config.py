@@ -291,6 +291,7 @@ def test_presets() -> None:
     env = Config.for_algo("eql", preset="envelope", seed=3)
     assert env.hidden_sizes == (256,) * 4 and env.n_omega == 4 and env.max_grad_norm == 0.1
     assert env.lb_homotopy_steps == 10_000 and env.target_update_freq == 1000 and env.seed == 3
+    assert (env.lb_loss, env.lb_weight, Config().lb_weight) == ("squared", 1.0, 4.0)  # morl-baselines: MSE, to 1
     assert env.return_mix == 0.0 and Config().return_mix == 0.5  # the peer has no behaviour returns; mope has
     assert (env.n_step, env.epsilon_decay_steps) == (1, 10_000)
     assert Config.from_dict({"preset": "paper", "batch_size": 8}).batch_size == 8  # keys override the preset

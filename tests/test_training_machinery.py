@@ -440,29 +440,32 @@ def test_benchmark_mope_eps_greedy_is_the_defaults_with_one_step_exploration(tmp
 
 def test_benchmark_older_methods_are_the_defaults_they_ran_with(tmp_path: Path) -> None:
     """Each older method differs from the next newer one by the fields of one switch, so the runs committed before
-    each switch keep their config under their new names, found by name beside the defaults': ``*-lb-abs`` from
-    ``mope`` and ``eql`` by the absolute L^B (:data:`LB_ABS`), ``mope-eps-greedy`` from ``mope-lb-abs`` by one-step
+    each switch keep their config under their new names, found by name beside the defaults': ``mope-lb-w1`` from
+    ``mope`` by the weight 1 of L^B (:data:`LB_W1`), ``*-lb-abs`` from ``mope-lb-w1`` and ``eql`` by the absolute
+    L^B of weight 1, ``mope-eps-greedy`` from ``mope-lb-abs`` by one-step
     exploration (:data:`PLAIN_EPSILON`), ``*-eps-greedy-unbounded`` from those by the seen-return bound
     (:data:`UNBOUNDED`), ``*-eps10k`` from those by epsilon's decay and the buffer (:data:`SHORT_EXPLORATION`), and
     ``*-const`` from those by the late target anneal and ``reward_norm``."""
     from mope.config import CONSTANT_TARGET, PLAIN_EPSILON, SHORT_EXPLORATION, UNBOUNDED
-    from mope.paper.benchmark import LB_ABS, METHODS, RENAMED_METHODS, benchmark_jobs, finished_runs
+    from mope.paper.benchmark import LB_ABS, LB_W1, METHODS, RENAMED_METHODS, benchmark_jobs, finished_runs
 
     assert all(new in METHODS for new, _ in RENAMED_METHODS.values())  # every old name points at a method
     c = Config()
-    assert (c.target_tau_end, c.target_tau_anneal_from, c.epsilon_repeat_mu, c.seen_bound_margin, c.lb_loss) == (
-        1e-4, 0.5, 2.0, 0.1, "squared")
-    methods = ["mope", "mope-lb-abs", "mope-eps-greedy", "mope-eps-greedy-unbounded", "mope-eps10k", "mope-const",
-               "eql", "eql-lb-abs", "eql-eps-greedy-unbounded", "eql-eps10k", "eql-const", "mope-bound-eps10k",
-               "mope-const-bound", "mope-paper"]
+    assert (c.target_tau_end, c.target_tau_anneal_from, c.epsilon_repeat_mu, c.seen_bound_margin, c.lb_loss,
+            c.lb_weight) == (1e-4, 0.5, 2.0, 0.1, "squared", 4.0)
+    methods = ["mope", "mope-lb-w1", "mope-lb-abs", "mope-eps-greedy", "mope-eps-greedy-unbounded", "mope-eps10k",
+               "mope-const", "eql", "eql-lb-abs", "eql-eps-greedy-unbounded", "eql-eps10k", "eql-const",
+               "mope-bound-eps10k", "mope-const-bound", "mope-paper"]
     jobs = benchmark_jobs(["resource-gathering-v0"], methods, [1], quick=False, steps=None)
     by_name = {j.name.removeprefix("resource-gathering-v0-").removesuffix("-s1"): j.payload for j in jobs}
 
     def changed(old: str, new: str) -> dict:
         return {k: by_name[old][k] for k in by_name[old] if by_name[old][k] != by_name[new][k]}
 
-    assert changed("mope-lb-abs", "mope") == changed("eql-lb-abs", "eql") == LB_ABS
-    assert by_name["mope-paper"]["lb_loss"] == "abs"  # eq. 4 as written
+    assert changed("mope-lb-w1", "mope") == LB_W1
+    assert changed("mope-lb-abs", "mope-lb-w1") == LB_ABS
+    assert changed("eql-lb-abs", "eql") == {**LB_W1, **LB_ABS}
+    assert (by_name["mope-paper"]["lb_loss"], by_name["mope-paper"]["lb_weight"]) == ("abs", 1.0)  # eq. 4 as written
     assert changed("mope-eps-greedy", "mope-lb-abs") == PLAIN_EPSILON
     assert changed("mope-eps-greedy-unbounded", "mope-eps-greedy") == UNBOUNDED
     assert changed("eql-eps-greedy-unbounded", "eql-lb-abs") == {**PLAIN_EPSILON, **UNBOUNDED}

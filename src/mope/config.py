@@ -69,15 +69,15 @@ PRESETS: dict[str, dict[str, Any]] = {
               "learning_rate": 1e-3, "learning_rate_end": None, "batch_size": 32, "target_tau": None,
               "target_update_freq": 100, "max_grad_norm": 10.0, "n_omega": 64, "relabel_broad": 0.0,
               "envelope_prefs": "relabel", "return_mix": 0.0, "n_step": 1, "epsilon_decay_steps": 10_000,
-              "buffer_size": 20_000, "reward_norm": None, "lb_loss": "abs", **CONSTANT_TARGET,
+              "buffer_size": 20_000, "reward_norm": None, "lb_loss": "abs", "lb_weight": 1.0, **CONSTANT_TARGET,
               **PLAIN_EPSILON, **UNBOUNDED},
     "envelope": {"q_head": "conditioned", "obs_encoding": "scale", "hidden_sizes": [256, 256, 256, 256],
                  "learning_rate": 3e-4, "learning_rate_end": None, "batch_size": 64, "n_omega": 4,
                  "target_tau": None, "target_update_freq": 1000, "max_grad_norm": 0.1, "lb_homotopy_steps": 10_000,
                  "relabel_broad": 0.0, "envelope_prefs": "relabel", "clip_targets": False, "learning_starts": 100,
                  "per_alpha": 0.6, "return_mix": 0.0, "n_step": 1, "epsilon_decay_steps": 10_000,
-                 "buffer_size": 20_000, "reward_norm": None, **CONSTANT_TARGET, **PLAIN_EPSILON,
-                 **UNBOUNDED},
+                 "buffer_size": 20_000, "reward_norm": None, "lb_weight": 1.0, **CONSTANT_TARGET,
+                 **PLAIN_EPSILON, **UNBOUNDED},
 }
 
 #: Per-environment defaults: ``mope train --env ID`` and ``MoPE(ID)`` use them for every setting not given (by a
@@ -87,14 +87,15 @@ PRESETS: dict[str, dict[str, Any]] = {
 #: pre-training updates on the demonstrations beat none on wins, exits and EU over 10 seeds of 200k steps). The game
 #: keeps the constant target: on 5 paired seeds the late anneal won 0.031 less at w_catch 0.8-1, past the 0.03 its
 #: rule allowed (docs/results/game-study/late-target-amd). It keeps one-step epsilon-greedy and the reward space's
-#: clamp too, and the absolute L^B: ez-greedy, the seen-return bound and the squared L^B were not measured on it.
+#: clamp too, and the absolute L^B of weight 1: ez-greedy, the seen-return bound and the squared L^B were not
+#: measured on it.
 ENV_DEFAULTS: dict[str, dict[str, Any]] = {
     "mope/RobotConfrontationDiscrete-v0": {"n_envs": 4, "buffer_size": 100_000, "epsilon_decay_steps": 10_000,
                                            "demos": "scripted",
                                            "demo_episodes": 50, "demo_batch_share": 0.25,
                                            "demo_pretrain_steps": 5_000,
                                            "eval_every": 20_000, "eval_prefs": 200, "lb_loss": "abs",
-                                           **CONSTANT_TARGET, **PLAIN_EPSILON, **UNBOUNDED},
+                                           "lb_weight": 1.0, **CONSTANT_TARGET, **PLAIN_EPSILON, **UNBOUNDED},
 }
 
 #: Fields added after mope 0.2.0, with the values that reproduce the runs saved before them: a saved config (it has
@@ -290,9 +291,9 @@ class Config:
     return_window: int = 2_000
     return_timeout_bootstrap: bool = True
     n_step: int = 1  # stored rewards per target row, cut at its first non-greedy action (watkins_n_step_targets)
-    #: Weight and form of the auxiliary loss, L = L^A + lb_weight * L^B: "squared" (w^T y - w^T Q)^2 as Yang et al.'s
-    #: code (learns the mean), or "abs" as eq. 4 is written (the median: a random risk as none, docs/results/lb-loss)
-    lb_weight: float = 1.0
+    #: L = L^A + lb_weight * L^B (weight 1 in the paper): "squared" (w^T y - w^T Q)^2 as Yang et al.'s code (the mean),
+    #: or "abs" as eq. 4 is written (the median: a random risk as none). Weight 4: DST's precision (results/lb-loss)
+    lb_weight: float = 4.0
     lb_loss: str = "squared"
     #: Homotopy of Yang et al.: the weight of L^B rises linearly from 0 to lb_weight over this many steps (0: off).
     lb_homotopy_steps: int = 0

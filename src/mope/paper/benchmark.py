@@ -101,9 +101,11 @@ BENCH_ENVS: dict[str, EnvBench] = {
 #: and 20k of that time and no reward normalisation (``reward_norm`` came later; it scales Deep-Sea-Treasure's rewards
 #: only, the others stay below 25). Every one of them, and the ``*-lb-abs`` methods (the defaults before L^B became
 #: squared, 2026-12-07, later), has the absolute L^B of eq. 4 as written (``lb_loss: abs``): the committed runs
-#: of those methods were trained with it.
+#: of those methods were trained with it, and every one but ``mope-paper`` with the weight 1 of L^B (``lb_weight``;
+#: ``mope-lb-w1`` is the squared L^B of weight 1, the defaults between the squared L^B and its weight 4).
 BEFORE_EZ_BOUND: dict[str, Any] = {**PLAIN_EPSILON, **UNBOUNDED}
 BEFORE_ANNEAL: dict[str, Any] = {**CONSTANT_TARGET, **SHORT_EXPLORATION, "reward_norm": None, **BEFORE_EZ_BOUND}
+LB_W1: dict[str, Any] = {"lb_weight": 1.0}
 LB_ABS: dict[str, Any] = {"lb_loss": "abs"}
 _METHODS: dict[str, dict[str, Any]] = {"mope-lb-abs": {"algo": "mope"}, "eql-lb-abs": {"algo": "eql"},
                                       "mope-paper": {"algo": "mope", "preset": "paper"},
@@ -119,7 +121,8 @@ _METHODS: dict[str, dict[str, Any]] = {"mope-lb-abs": {"algo": "mope"}, "eql-lb-
                                       "eql-const": {"algo": "eql", **BEFORE_ANNEAL},
                                       "mope-const-bound": {"algo": "mope", **BEFORE_ANNEAL, "seen_bound_margin": 0.1}}
 METHODS: dict[str, dict[str, Any]] = {"mope": {"algo": "mope"}, "eql": {"algo": "eql"},
-                                      **{m: {**LB_ABS, **v} for m, v in _METHODS.items()},
+                                      "mope-lb-w1": {"algo": "mope", **LB_W1},
+                                      **{m: {**LB_W1, **LB_ABS, **v} for m, v in _METHODS.items()},
                                       "envelope": {}, "envelope-eps-half": {}}
 #: morl-baselines' Envelope methods: name -> the settings that differ from its example's, given the run's budget.
 ENVELOPE_METHODS: dict[str, Callable[[int], dict[str, Any]]] = {

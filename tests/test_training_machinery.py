@@ -414,6 +414,9 @@ def test_readme_benchmark_table_is_the_committed_results() -> None:
     block = readme[start + len(README_MARKERS[0]):end].strip("\n") + "\n"
     assert block == readme_table(summary)
     assert block == (root / "docs/results/benchmark/readme_table.md").read_text()
+    methods = {row.split("|")[3].strip() for row in block.splitlines()[2:]}  # today's, the two before, the peer
+    assert {"mope", "envelope"} <= methods <= {"mope", "eql", "mope-lb-w1", "mope-lb-abs", "eql-lb-abs", "envelope"}
+    assert "| mope-const |" in (root / "docs/results/benchmark/benchmark.md").read_text()  # the others: there
 
 
 def test_benchmark_mope_eps_greedy_is_the_defaults_with_one_step_exploration(tmp_path: Path) -> None:

@@ -204,3 +204,70 @@ def test_greedy_policy_metrics_measure_the_utility_given_up_and_the_optimism() -
     np.testing.assert_allclose(d["belief_gap_mean"], np.mean(w @ (believed - got)), atol=1e-12)
     assert d["greedy_utility_share"] == pytest.approx((w @ got).sum() / best.sum())
     assert d["path_error"] > 0  # the risky route's first step is not optimal for either preference
+
+
+# ------------------------------------------------------------------------------------------------------------
+# four-room: no published front; the exact one from a programme over its tours (mope.evaluation.four_room)
+# ------------------------------------------------------------------------------------------------------------
+#: A small four-room maze: 5 shapes of 3 kinds, a wall with one door, start bottom left, goal top right.
+SMALL_MAZE = np.array([["1", " ", "X", " ", "G"],
+                       [" ", "2", "X", "3", " "],
+                       [" ", " ", "1", " ", " "],
+                       ["3", " ", "X", " ", "2"],
+                       ["_", " ", "X", " ", " "]])
+
+
+def _four_room(maze: np.ndarray | None = None):
+    from mo_gymnasium.envs.four_room.four_room import MAZE, FourRoom
+
+    return FourRoom(maze=MAZE if maze is None else maze)
+
+
+@pytest.mark.parametrize("gamma", [0.99, 0.9])
+def test_four_room_tours_are_value_iterations_optimum_and_play_as_computed(gamma: float) -> None:
+    """On a small maze (5 x 5 cells x 32 flag sets) the tour programme's optimal value equals value iteration's on the
+    cell-level model at every preference, and each optimal tour, played in the real environment, ends at the goal
+    with the programme's discounted return. The door (2, 2) holds a shape: every tour must collect it."""
+    from mope.evaluation.four_room import cell_model, optimal_tours
+    from mope.preferences import equally_spaced
+
+    env = _four_room(SMALL_MAZE)
+    prefs = equally_spaced(3, 36)
+    returns, tours = optimal_tours(env, prefs, gamma)
+    truth = value_iteration(cell_model(env), prefs, gamma)
+    model = cell_model(env)
+    np.testing.assert_allclose(np.einsum("nm,nm->n", returns, prefs), truth.v[:, model.start], atol=1e-9)
+    for w_return, tour in zip(returns, tours, strict=True):
+        env.reset(seed=0)
+        total, discount, done = np.zeros(3), 1.0, False
+        for a in tour:
+            assert not done
+            _, r, done, _, _ = env.step(a)
+            total, discount = total + discount * r, discount * gamma
+        assert done
+        np.testing.assert_allclose(total, w_return, atol=1e-6)
+    assert returns[:, 0].min() > 0  # the door's kind-1 shape is on every tour
+
+
+def test_four_room_reference_front_is_the_stored_exact_one() -> None:
+    """The evaluator's front for MO-Gymnasium's four-room at gamma 0.99 is the stored convex coverage set: its optimal
+    EUM over the evaluation's 100 preferences is the one scripts/four_room_exact.py computed (3.580), each point is
+    on the simplex's upper envelope (no point dominated), and another discount or map gets no front."""
+    import json
+
+    from mope.evaluation.diagnose import reference_front
+    from mope.evaluation.evaluator import N_EUM_PREFS
+    from mope.evaluation.four_room import STORED_FRONT
+    from mope.metrics import convex_coverage_set, optimal_utility
+    from mope.preferences import equally_spaced
+
+    env = mo_gym.make("four-room-v0")
+    front = reference_front(env, 0.99)
+    stored = json.loads(STORED_FRONT.read_text())
+    assert front is not None and front.shape == (len(stored["ccs"]), 3)
+    eum = float(np.mean(optimal_utility(equally_spaced(3, N_EUM_PREFS), front)))
+    assert eum == pytest.approx(stored["eum_optimal"], abs=1e-9) and eum == pytest.approx(3.580, abs=1e-3)
+    assert len(convex_coverage_set(front)) == len(front)
+    assert stored["longest_optimal_tour"] < stored["horizon"] == env.spec.max_episode_steps
+    assert reference_front(env, 0.95) is None
+    assert reference_front(_four_room(SMALL_MAZE), 0.99) is None

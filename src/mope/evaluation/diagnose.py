@@ -289,9 +289,15 @@ _EXACT_FRONTS: dict[tuple[str, str, float], np.ndarray] = {}
 
 
 def reference_front(env: gym.Env, gamma: float) -> np.ndarray | None:
-    """The front mope evaluates against: the environment's published one (:func:`mope.envs.known_front`), or for an
-    environment of :data:`WRONG_PUBLISHED_FRONTS` the exact one (:func:`exact_front`); ``None`` without either."""
+    """The front mope evaluates against: the environment's published one (:func:`mope.envs.known_front`); for an
+    environment of :data:`WRONG_PUBLISHED_FRONTS` the exact one (:func:`exact_front`); for four-room, which
+    publishes none, the exact one stored for its map and discount (:func:`mope.evaluation.four_room.stored_front`);
+    ``None`` without any."""
     kind = type(env.unwrapped).__name__
+    if kind == "FourRoom":  # publishes none: the exact one mope stores (mope.evaluation.four_room)
+        from mope.evaluation.four_room import stored_front
+
+        return stored_front(env, gamma)
     if kind in WRONG_PUBLISHED_FRONTS and 0 < gamma < 1:
         key = (kind, repr(getattr(env.unwrapped, "map", None)), float(gamma))
         if key not in _EXACT_FRONTS:

@@ -90,8 +90,8 @@ BENCH_ENVS: dict[str, EnvBench] = {
                                           "epsilon over 10k and gamma 0.99 for every method; 100 preferences (each "
                                           "episode can last 1,000 steps)"),
     "four-room-v0": EnvBench(50_000, 2_000, 2_500, 200, None,
-                             "no published front or budget: 50k steps (a 13x13 grid, 3 objectives); HV and EUM "
-                             "against the best any method found"),
+                             "no published front or budget: 50k steps (a 13x13 grid, 3 objectives); EUM against "
+                             "the exact optimum (mope.evaluation.four_room, from the environment's dynamics)"),
 }
 #: Methods: name -> config settings (``envelope`` is morl-baselines' Envelope). The ``*-eps-greedy*`` methods are the
 #: defaults before ez-greedy exploration and, ``*-unbounded``, the seen-return bound (2026-12-07). Older still, the
@@ -322,7 +322,7 @@ def summarise(out: Path, jobs: list[Job]) -> dict[str, dict[str, dict[str, Any]]
         optimal = [r["final"].get("eum_optimal", math.nan) for rs in by_method.values() for r in rs]
         recorded = float(optimal[0]) if optimal and np.isfinite(optimal[0]) else math.nan
         gamma = float(next(j.payload.get("gamma", 0.99) for j in jobs if j.payload["env_id"] == env_id))
-        optimal_eum = reference_optimal_eum(env_id, gamma) if np.isfinite(recorded) else math.nan
+        optimal_eum = reference_optimal_eum(env_id, gamma)  # today's reference, also for runs that recorded none
         for rs in by_method.values():  # the gap to today's reference front, whatever front a run recorded
             for r in rs:
                 r["final"]["eum_gap"] = optimal_eum - r["final"]["eum"]
@@ -387,6 +387,7 @@ def readme_table(summary: dict[str, dict[str, dict[str, Any]]]) -> str:
     rows = []
     for env_id, by_method in summary.items():
         known = by_method["_meta"]["known_front"]
+        optimum = math.isfinite(by_method["_meta"].get("optimal_eum", math.nan))
         single = not by_method["_meta"].get("stochastic", False)  # single outcomes compare with the front
         steps = by_method["_meta"]["steps"]
         for k, method in enumerate(m for m in README_METHODS if m in by_method):
@@ -394,7 +395,7 @@ def readme_table(summary: dict[str, dict[str, dict[str, Any]]]) -> str:
             rows.append([env_id if k == 0 else "", f"{steps:,}" if k == 0 else "", method,
                          str(by_method[method]["seeds"]), _cell(st["cr"], ".3f") if known and single else "-",
                          _cell(st["eum"], ".3f"), _cell(st["eum_last"], ".3f") if "eum_last" in st else "n/a",
-                         _cell(st["eum_gap"], ".3f") if known else "-",
+                         _cell(st["eum_gap"], ".3f") if known or optimum else "-",
                          _cell(st["hv"], ".1f") if single else "-",
                          f"{by_method[method]['reached']}/{by_method[method]['seeds']}"])
     return markdown_table(["environment", "steps", "method", "seeds", "CR", "EUM",
@@ -410,7 +411,10 @@ def _target_note(meta: dict[str, Any]) -> list[str]:
                                             if math.isfinite(meta.get("optimal_eum", math.nan)) else
                                             " (95 % of the best final EUM)") + "."] if math.isfinite(target) else []
     recorded = meta.get("recorded_optimal_eum", math.nan)
-    if math.isfinite(recorded) and abs(recorded - meta["optimal_eum"]) > 1e-6:
+    if not math.isfinite(recorded) and math.isfinite(meta.get("optimal_eum", math.nan)):
+        note.append("The runs' metrics.csv recorded no optimum (they ran before mope knew this environment's exact "
+                    "front, mope.evaluation.diagnose.reference_front); the optimum and the EUM gap here are of it.")
+    elif math.isfinite(recorded) and abs(recorded - meta["optimal_eum"]) > 1e-6:
         note.append(f"The runs' metrics.csv recorded the optimum {recorded:.3f}, of the environment's published "
                     "front; the optimum and the EUM gap here are of the exact front "
                     "(mope.evaluation.diagnose.WRONG_PUBLISHED_FRONTS says why).")
@@ -440,8 +444,9 @@ def render(summary: dict[str, dict[str, dict[str, Any]]], quick: bool, info: dic
         meta = by_method["_meta"]
         b = BENCH_ENVS[env_id]
         stochastic = meta.get("stochastic", False)
-        cols = [c for c in COLUMNS if (meta["known_front"] or c[0] not in ("cr", "optimal_share", "eum_gap",
-                                                                          "steps_to_cr1"))
+        optimum = math.isfinite(meta.get("optimal_eum", math.nan))
+        cols = [c for c in COLUMNS if (meta["known_front"] or (optimum and c[0] == "eum_gap")
+                                       or c[0] not in ("cr", "optimal_share", "eum_gap", "steps_to_cr1"))
                 and not (stochastic and c[0] in SINGLE_OUTCOME_COLUMNS)]
         header = ["method", "seeds", *(c[1] for c in cols), "seeds that reached the target"]
         env_ratio = by_method.get("envelope")

@@ -23,7 +23,7 @@ import gymnasium as gym
 import mo_gymnasium  # noqa: F401  (registers four-room-v0)
 import numpy as np
 
-from mope.evaluation import four_room
+from mope.evaluation.diagnose import four_room_model
 from mope.evaluation.evaluator import N_EUM_PREFS
 from mope.evaluation.four_room import STORED_FRONT, exact_front, optimal_tours
 from mope.metrics import convex_coverage_set
@@ -38,8 +38,8 @@ def base_env() -> gym.Env:
 
 def cell_model() -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """MO-Gymnasium's map as ``(next_state (S, 4), reward (S, 4, 3), terminal (S, 4), start)``
-    (:func:`mope.evaluation.four_room.cell_model`)."""
-    model = four_room.cell_model(base_env())
+    (:func:`mope.evaluation.diagnose.four_room_model`)."""
+    model = four_room_model(base_env())
     return model.next_state, model.reward, model.terminal, model.start
 
 

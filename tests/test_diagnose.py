@@ -228,7 +228,8 @@ def test_four_room_tours_are_value_iterations_optimum_and_play_as_computed(gamma
     """On a small maze (5 x 5 cells x 32 flag sets) the tour programme's optimal value equals value iteration's on the
     cell-level model at every preference, and each optimal tour, played in the real environment, ends at the goal
     with the programme's discounted return. The door (2, 2) holds a shape: every tour must collect it."""
-    from mope.evaluation.four_room import cell_model, optimal_tours
+    from mope.evaluation.diagnose import four_room_model as cell_model
+    from mope.evaluation.four_room import optimal_tours
     from mope.preferences import equally_spaced
 
     env = _four_room(SMALL_MAZE)

@@ -40,6 +40,8 @@ import numpy as np
 
 from mope.envs import known_front
 from mope.errors import EnvironmentError_, MopeError
+from mope.evaluation.four_room import MOVES as FOUR_ROOM_MOVES
+from mope.evaluation.four_room import stored_front
 from mope.metrics import convex_coverage_set
 from mope.preferences import equally_spaced, validate_preference
 
@@ -211,6 +213,45 @@ def _resource_gathering_model(base: gym.Env) -> TabularModel:
                         _reachable(next_state, terminal, start, prob), prob)
 
 
+def four_room_model(env: gym.Env) -> TabularModel:
+    """The cell-level model of a four-room maze, for :func:`value_iteration` on small mazes and as a check of
+    :func:`mope.evaluation.four_room.optimal_tours`: a state is (cell, collected flags), ``cell * 2^K + flags`` for
+    ``K`` shapes (MO-Gymnasium's map: 169 x 4,096 states, walls included). Not used by :func:`tabular_model`: value
+    iteration over MO-Gymnasium's map at 101 preferences would need gigabytes."""
+    base = env.unwrapped
+    rows, cols = base.maze.shape
+    n_masks = 1 << len(base.shape_ids)
+    mask = np.arange(n_masks)
+    m = len(base.all_shapes)
+    next_state = np.zeros((rows * cols * n_masks, len(FOUR_ROOM_MOVES)), dtype=np.int64)
+    reward = np.zeros((rows * cols * n_masks, len(FOUR_ROOM_MOVES), m))
+    terminal = np.zeros((rows * cols * n_masks, len(FOUR_ROOM_MOVES)), dtype=bool)
+    for r in range(rows):
+        for c in range(cols):
+            here = r * cols + c
+            block = slice(here * n_masks, (here + 1) * n_masks)
+            for a, (dr, dc) in enumerate(FOUR_ROOM_MOVES):
+                nr, nc = r + dr, c + dc
+                if not (0 <= nr < rows and 0 <= nc < cols) or (nr, nc) in base.occupied:
+                    next_state[block, a] = here * n_masks + mask  # stays, no reward
+                    continue
+                cell = nr * cols + nc
+                next_state[block, a] = cell * n_masks + mask
+                if (nr, nc) == base.goal:
+                    reward[block, a], terminal[block, a] = 1.0, True
+                elif (nr, nc) in base.shape_ids:
+                    bit = 1 << base.shape_ids[(nr, nc)]
+                    next_state[block, a] = cell * n_masks + (mask | bit)
+                    reward[block, a, base.all_shapes[base.maze[nr, nc]]] = (mask & bit) == 0
+    sr, sc = base.initial[0]
+    start = (sr * cols + sc) * n_masks
+    k = len(base.shape_ids)
+    obs = np.concatenate([np.repeat(np.arange(rows), cols * n_masks)[:, None],
+                          np.tile(np.repeat(np.arange(cols), n_masks), rows)[:, None],
+                          np.tile((mask[:, None] >> np.arange(k)) & 1, (rows * cols, 1))], axis=1).astype(np.int32)
+    return TabularModel(obs, next_state, reward, terminal, start, _reachable(next_state, terminal, start))
+
+
 @dataclass
 class GroundTruth:
     """Exact values for a set of preferences (``n`` preferences, ``S`` states, ``A`` actions, ``m`` objectives)."""
@@ -295,8 +336,6 @@ def reference_front(env: gym.Env, gamma: float) -> np.ndarray | None:
     ``None`` without any."""
     kind = type(env.unwrapped).__name__
     if kind == "FourRoom":  # publishes none: the exact one mope stores (mope.evaluation.four_room)
-        from mope.evaluation.four_room import stored_front
-
         return stored_front(env, gamma)
     if kind in WRONG_PUBLISHED_FRONTS and 0 < gamma < 1:
         key = (kind, repr(getattr(env.unwrapped, "map", None)), float(gamma))

@@ -10,8 +10,9 @@ shortest path discounted by its length: :func:`optimal_tours`. It is exact for t
 evaluation's 200-step limit when the optimal tour is shorter (:func:`exact_front` checks it).
 
 ``scripts/four_room_exact.py`` checks the programme against the real environment and against plain value iteration
-over the ~690k (cell, flags) states, and writes the convex coverage set that :func:`stored_front` reads
-(``fronts/four-room-v0.json``): :func:`mope.evaluation.diagnose.reference_front` evaluates against it.
+over the ~690k (cell, flags) states (:func:`mope.evaluation.diagnose.four_room_model`), and writes the convex
+coverage set that :func:`stored_front` reads (``fronts/four-room-v0.json``):
+:func:`mope.evaluation.diagnose.reference_front` evaluates against it.
 """
 
 from __future__ import annotations
@@ -24,7 +25,6 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
-from mope.evaluation.diagnose import TabularModel, _reachable
 from mope.metrics import convex_coverage_set
 from mope.preferences import equally_spaced
 
@@ -134,44 +134,6 @@ def exact_front(env: gym.Env, gamma: float, n_prefs: int = 400, horizon: int | N
     if horizon is not None and longest >= horizon:
         raise ValueError(f"an optimal tour takes {longest} steps, not fewer than the time limit {horizon}")
     return convex_coverage_set(np.unique(returns.round(12), axis=0)), returns, longest
-
-
-def cell_model(env: gym.Env) -> TabularModel:
-    """The cell-level model of a four-room maze, for value iteration (:func:`mope.evaluation.diagnose.value_iteration`)
-    on small mazes and as a check of :func:`optimal_tours`: a state is (cell, collected flags), ``cell * 2^K +
-    flags`` for ``K`` shapes (MO-Gymnasium's map: 169 x 4,096 states, walls included)."""
-    base = env.unwrapped
-    rows, cols = base.maze.shape
-    n_masks = 1 << len(base.shape_ids)
-    mask = np.arange(n_masks)
-    m = len(base.all_shapes)
-    next_state = np.zeros((rows * cols * n_masks, len(MOVES)), dtype=np.int64)
-    reward = np.zeros((rows * cols * n_masks, len(MOVES), m))
-    terminal = np.zeros((rows * cols * n_masks, len(MOVES)), dtype=bool)
-    for r in range(rows):
-        for c in range(cols):
-            here = r * cols + c
-            block = slice(here * n_masks, (here + 1) * n_masks)
-            for a, (dr, dc) in enumerate(MOVES):
-                nr, nc = r + dr, c + dc
-                if not (0 <= nr < rows and 0 <= nc < cols) or (nr, nc) in base.occupied:
-                    next_state[block, a] = here * n_masks + mask  # stays, no reward
-                    continue
-                cell = nr * cols + nc
-                next_state[block, a] = cell * n_masks + mask
-                if (nr, nc) == base.goal:
-                    reward[block, a], terminal[block, a] = 1.0, True
-                elif (nr, nc) in base.shape_ids:
-                    bit = 1 << base.shape_ids[(nr, nc)]
-                    next_state[block, a] = cell * n_masks + (mask | bit)
-                    reward[block, a, base.all_shapes[base.maze[nr, nc]]] = (mask & bit) == 0
-    sr, sc = base.initial[0]
-    start = (sr * cols + sc) * n_masks
-    k = len(base.shape_ids)
-    obs = np.concatenate([np.repeat(np.arange(rows), cols * n_masks)[:, None],
-                          np.tile(np.repeat(np.arange(cols), n_masks), rows)[:, None],
-                          np.tile((mask[:, None] >> np.arange(k)) & 1, (rows * cols, 1))], axis=1).astype(np.int32)
-    return TabularModel(obs, next_state, reward, terminal, start, _reachable(next_state, terminal, start))
 
 
 @cache

@@ -320,7 +320,7 @@ def summarise(out: Path, jobs: list[Job]) -> dict[str, dict[str, dict[str, Any]]
         known = any(np.isfinite(r["final"].get("cr", math.nan)) for rs in by_method.values() for r in rs)
         best_eum = max(r["final"]["eum"] for rs in by_method.values() for r in rs)
         optimal = [r["final"].get("eum_optimal", math.nan) for rs in by_method.values() for r in rs]
-        recorded = float(optimal[0]) if optimal and np.isfinite(optimal[0]) else math.nan
+        recorded = next((float(o) for o in optimal if np.isfinite(o)), math.nan)  # the first run that recorded one
         gamma = float(next(j.payload.get("gamma", 0.99) for j in jobs if j.payload["env_id"] == env_id))
         optimal_eum = reference_optimal_eum(env_id, gamma)  # today's reference, also for runs that recorded none
         for rs in by_method.values():  # the gap to today's reference front, whatever front a run recorded

@@ -23,7 +23,7 @@ import gymnasium as gym
 import mo_gymnasium  # noqa: F401  (registers four-room-v0)
 import numpy as np
 
-from mope.evaluation.diagnose import four_room_model
+from mope.evaluation.diagnose import four_room_model, value_iteration
 from mope.evaluation.evaluator import N_EUM_PREFS
 from mope.evaluation.four_room import STORED_FRONT, exact_front, optimal_tours
 from mope.metrics import convex_coverage_set
@@ -67,17 +67,10 @@ def check_model(steps: int = 20_000, seed: int = 0) -> None:
         s = index(obs)
 
 
-def value_iteration_start(prefs: np.ndarray, tol: float = 1e-12) -> np.ndarray:
+def value_iteration_start(prefs: np.ndarray) -> np.ndarray:
     """Infinite-horizon V*(s0, w) by plain value iteration on the cell-level model (slow: a check)."""
-    nxt, rew, term, start = cell_model()
-    cont = GAMMA * ~term
-    r_scal = np.einsum("nm,sam->nsa", prefs, rew)
-    v = np.zeros((len(prefs), len(nxt)))  # from below (rewards >= 0): rises to V*
-    while True:
-        v_new = (r_scal + cont[None] * v[:, nxt]).max(axis=2)
-        if np.max(np.abs(v_new - v)) <= tol:
-            return v_new[:, start]
-        v = v_new
+    model = four_room_model(base_env())
+    return value_iteration(model, prefs, GAMMA).v[:, model.start]
 
 
 def play(actions: list[int]) -> np.ndarray:

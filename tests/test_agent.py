@@ -212,19 +212,21 @@ def mirrored_map_at(steps: int, **overrides) -> tuple[dict[str, float], float]:
 
 
 @pytest.mark.slow
-def test_the_defaults_cover_the_mirrored_maps_seed_2_by_9k_steps():
-    """Learning test of the defaults' exploration and bound on the mirrored map (issue 33), about 3 minutes on one
+def test_the_defaults_cover_the_mirrored_maps_seed_2_by_8k_steps():
+    """Learning test of the defaults' exploration and bound on the mirrored map (issue 33), about 2 minutes on one
     core.
 
     With one-step epsilon-greedy and no seen-return bound (the defaults before 2026-12-07) seed 2 has not found the
     124 treasure at 8k steps on the AMD EPYC: CR 0.5, optimal share 0.14, the start's value underestimated by 27.6.
     ez-greedy's straight runs reach it (docs/results/ez-greedy): CR 1.000 at 8k with the absolute L^B; with the
     squared L^B of weight 1 (docs/results/lb-loss) CR 1 at 3k-4k, 0.8 at 5k-8k (optimal share 0.98 at 8k) and 1 from
-    9k on; of weight 4 (the default since) CR 1 at 3k-4k, 0.8 at 5k and 1 from 6k on (optimal share 0.997 at 9k).
+    9k on; of weight 4 (the default since) CR 1 at 3k-4k, 0.8 at 5k and 1 from 6k on (optimal share 0.972 / 0.993 /
+    0.999 / 0.997 and overestimation -6.6 / -1.4 / -0.31 / -0.16 at 6k / 7k / 8k / 9k, 2026-12-07; the test ran 9k
+    steps before).
     The test also holds the signature of the divergence this seed once had (issue 12: its largest Q was 649 at 8k
     with ``return_mix: 0``): no Q-value beyond any real return (124).
     """
-    final, q_max = mirrored_map_at(9_000)
+    final, q_max = mirrored_map_at(8_000)
     assert final["cr"] == 1.0 and final["optimal_share"] >= 0.9, final
     assert q_max <= 130, q_max
     assert abs(final["overestimation"]) <= 2.0, final

@@ -23,9 +23,10 @@ from mope.experiments.runs import RunFolderError, run_status, train_run
 
 SMALL = {"total_steps": 300, "eval_every": 100, "eval_prefs": 50, "n_omega": 8, "hidden_sizes": [32, 32],
          "learning_starts": 50, "checkpoint_every": 100, "seed": 3}
-# slow enough (a few ms per step) that a signal lands mid-run, fast enough for CI
+# slow enough (a few ms per step) that a signal lands mid-run, fast enough for CI: a 64x64 network (the default
+# 256x256x256 made each of these tests 45 s of the suite)
 SIGNALLED = {"total_steps": 1600, "eval_every": 200, "eval_prefs": 50, "n_omega": 8, "learning_starts": 100,
-             "checkpoint_every": 400, "seed": 1}
+             "checkpoint_every": 400, "seed": 1, "hidden_sizes": [64, 64], "batch_size": 32}
 
 
 def _metrics(run: Path) -> list[dict[str, str]]:
@@ -128,7 +129,8 @@ def uninterrupted(tmp_path_factory) -> Path:
 
 
 def _train_cmd(out: Path) -> list[str]:
-    sets = [f"--set={k}={v}" for k, v in SIGNALLED.items() if k not in ("total_steps", "seed")]
+    sets = [f"--set={k}={','.join(map(str, v)) if isinstance(v, list) else v}" for k, v in SIGNALLED.items()
+            if k not in ("total_steps", "seed")]
     return [sys.executable, "-m", "mope.cli", "train", "--algo", "mope", "--steps", str(SIGNALLED["total_steps"]),
             "--seed", str(SIGNALLED["seed"]), "--out", str(out), "--no-progress", *sets]
 

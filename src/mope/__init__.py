@@ -19,18 +19,31 @@ diagnosis, diversity, videos); :mod:`mope.experiments` (run folders, jobs, sweep
 from __future__ import annotations
 
 import importlib
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from mope.agent.agent import EQL, MoPE, TrainingDivergedError, make_agent
 from mope.config import ALGOS, Config
 from mope.envs import make_env
 from mope.errors import CheckpointError, ConfigError, MopeError, PreferenceError
-from mope.evaluation.evaluator import Evaluator, Solutions, solutions
 from mope.moved import MOVED_MODULES
+
+if TYPE_CHECKING:
+    from mope.agent.agent import EQL, MoPE, TrainingDivergedError, make_agent
+    from mope.evaluation.evaluator import Evaluator, Solutions, solutions
+
+#: The public names that need torch, imported on first use: ``import mope`` (and so every ``mope`` command that
+#: stops at bad input) does not pay torch's 2-4 s import.
+_LAZY = {"EQL": "mope.agent.agent", "MoPE": "mope.agent.agent", "TrainingDivergedError": "mope.agent.agent",
+         "make_agent": "mope.agent.agent", "Evaluator": "mope.evaluation.evaluator",
+         "Solutions": "mope.evaluation.evaluator", "solutions": "mope.evaluation.evaluator"}
 
 
 def __getattr__(name: str) -> Any:
-    """``mope.replay`` and the other old paths as attributes, imported on first use."""
+    """The torch-backed public names (:data:`_LAZY`), and ``mope.replay`` and the other old paths, imported on
+    first use."""
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
     if f"mope.{name}" in MOVED_MODULES:
         return importlib.import_module(f"mope.{name}")
     raise AttributeError(f"module 'mope' has no attribute {name!r}")

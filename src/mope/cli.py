@@ -107,8 +107,6 @@ def train(
     progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
 ) -> None:
     """Train an agent, evaluating CR/HV/EUM as it goes; writes a run folder."""
-    from mope.experiments.runs import train_run
-
     run_dir = resume
     try:
         if resume is not None:
@@ -124,6 +122,9 @@ def train(
                  "hidden_sizes": _int_list("--hidden", hidden) if hidden is not None else None}
         cfg = _config_from_cli(config, algo, flags, set_ or [], preset)
         run_dir = out or Path("runs") / f"{cfg.env_id}-{cfg.algo}-s{cfg.seed}"
+        _check_env(cfg.env_id)
+        from mope.experiments.runs import train_run  # torch only once the settings are checked: bad input is fast
+
         result = train_run(cfg, run_dir, progress=progress, overwrite=overwrite)
     except KeyboardInterrupt:
         _interrupted(run_dir)
@@ -145,6 +146,17 @@ def _int_list(flag: str, text: str) -> list[int]:
         return [int(x) for x in text.split(",")]
     except ValueError:
         raise ConfigError(f"{flag} '{text}' is not a comma-separated list of integers") from None
+
+
+def _check_env(env_id: str) -> None:
+    """Refuse an unknown environment, or one whose spaces EQL/MoPE cannot learn, before torch is imported."""
+    from mope.envs import check_env_fits, make_env
+
+    env = make_env(env_id)
+    try:
+        check_env_fits(env, env_id)
+    finally:
+        env.close()
 
 
 def _config_from_cli(config_file: Path | None, algo: str | None, flags: dict[str, Any], sets: list[str],

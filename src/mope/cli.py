@@ -16,7 +16,7 @@ from typing import Annotated, Any
 import typer
 
 from mope.config import ALGOS, ENV_DEFAULTS, PRESETS, Config, check_algo, parse_overrides, read_config_file
-from mope.errors import ConfigError, MopeError, is_disk_full, one_line
+from mope.errors import ConfigError, MopeError, RunFolderError, is_disk_full, one_line
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Multi-objective RL with Preference Exploration (MoPE) and Envelope Q-learning.")
@@ -180,8 +180,6 @@ def _resume(run_dir: Path, given: list[str], device: str | None, progress: bool,
     """``mope train --resume RUN_DIR``: continue from resume.pt, or start over a run that has none yet; with
     ``--overwrite``, start the run over with its saved config (its old results stay until the new run's first
     checkpoint)."""
-    from mope.experiments.runs import RunFolderError, run_status, train_run
-
     if given:
         raise ConfigError(f"--resume continues a run with its saved config; drop {', '.join(given)}")
     if run_dir.is_file():
@@ -189,6 +187,8 @@ def _resume(run_dir: Path, given: list[str], device: str | None, progress: bool,
     if not (run_dir / "config.json").is_file():
         raise RunFolderError(f"--resume '{run_dir}' is not a mope run folder (no config.json)")
     cfg = Config.load(run_dir / "config.json")
+    from mope.experiments.runs import run_status, train_run  # torch only once the folder is checked
+
     if device is not None:
         cfg = cfg.replace(device=device)
     if overwrite:

@@ -79,6 +79,10 @@ class EnvironmentError_(MopeError):
     """An environment id is unknown or the environment is not supported."""
 
 
+class RunFolderError(MopeError):
+    """The output folder is unusable (exists with results, or is not writable)."""
+
+
 class CheckpointError(MopeError):
     """A checkpoint cannot be read, is unsafe, or does not fit."""
 

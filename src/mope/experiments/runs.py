@@ -48,7 +48,7 @@ from mope.agent.checkpoint import mope_version
 from mope.agent.runner import Callback, EvalCallback, IntervalStats, ProgressBar, StopWhen, crossed_now, train
 from mope.config import Config, buffer_capacity, epsilon_decay_steps_of
 from mope.envs import make_env
-from mope.errors import CheckpointError, MopeError, is_disk_full, one_line, short_repr
+from mope.errors import CheckpointError, MopeError, RunFolderError, is_disk_full, one_line, short_repr
 from mope.evaluation.evaluator import OUTCOME_KEYS, TRUTH_KEYS, Evaluator, Solutions, solutions
 from mope.experiments.locks import FolderLock
 from mope.metrics import EVALUATE_KEYS
@@ -65,10 +65,6 @@ STATS_COLUMNS = ["step", "updates", "epsilon", "loss", "loss_a", "loss_b", "td_a
 def stats_columns(n_objectives: int) -> list[str]:
     """train_stats.csv's columns: :data:`STATS_COLUMNS` and each objective's mean training-episode return."""
     return [*STATS_COLUMNS, *(f"ep_return_{i}" for i in range(n_objectives))]
-
-
-class RunFolderError(MopeError):
-    """The output folder is unusable (exists with results, or is not writable)."""
 
 
 @dataclass

@@ -163,10 +163,14 @@ def test_old_paths_work_in_a_fresh_interpreter() -> None:
     assert res.returncode == 0 and res.stdout.strip() == "ok", res.stderr
 
 
-def test_import_mope_and_bad_input_do_not_import_torch() -> None:
+def test_import_mope_and_bad_input_do_not_import_torch(tmp_path) -> None:
     """``import mope`` leaves torch unimported until a torch-backed name is used (``mope.MoPE`` and the other names of
-    ``mope._LAZY``), and ``mope train`` refuses a bad environment or a bad ``--resume`` folder before importing it:
-    such a command answers in about 1 s, where torch's import alone takes 2-4 s."""
+    ``mope._LAZY``), ``mope train`` refuses a bad environment or a bad ``--resume`` folder before importing it, and
+    ``mope act`` a preference of the wrong length for a run folder: such a command answers in about 1 s, where
+    torch's import alone takes 2-4 s."""
+    from mope import Config
+
+    Config(env_id="deep-sea-treasure-v0").save(tmp_path / "config.json")  # a run folder's config (2 objectives)
     code = ("import sys, mope; assert 'torch' not in sys.modules, 'import mope imported torch'; "
             "from mope import Config, make_env; assert 'torch' not in sys.modules; "
             "from mope import MoPE, Evaluator, solutions; assert 'torch' in sys.modules; "
@@ -174,7 +178,8 @@ def test_import_mope_and_bad_input_do_not_import_torch() -> None:
             "print('ok')")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert res.returncode == 0 and res.stdout.strip() == "ok", res.stderr
-    for args in (["train", "--env", "deep-sea-treasur-v0"], ["train", "--resume", "no/such/run"]):
+    for args in (["train", "--env", "deep-sea-treasur-v0"], ["train", "--resume", "no/such/run"],
+                 ["act", str(tmp_path), "--pref", "0.3,0.3,0.4"]):
         code = ("import sys, mope.cli\n"
                 f"try:\n    mope.cli.app({args!r})\nexcept SystemExit as exc:\n"
                 "    print(exc.code, 'torch' in sys.modules)")

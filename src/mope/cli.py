@@ -159,6 +159,24 @@ def _check_env(env_id: str) -> None:
         env.close()
 
 
+def _check_pref_of_run(path: Path, pref: str) -> None:
+    """Refuse a bad ``--pref`` for a run folder before torch is imported: its length comes from the environment
+    of the folder's config.json. A checkpoint file is checked once it is loaded (the only place its env is named)."""
+    if not (path.is_dir() and (path / "config.json").is_file()):
+        return
+    from mope.envs import check_env_fits, make_env
+    from mope.preferences import validate_preference
+
+    try:
+        cfg = Config.load(path / "config.json")
+        env = make_env(cfg.env_id)
+        m = check_env_fits(env, cfg.env_id).n_objectives
+        env.close()
+    except MopeError:
+        return  # a broken folder is named by the loader, as before
+    validate_preference(pref, m)
+
+
 def _config_from_cli(config_file: Path | None, algo: str | None, flags: dict[str, Any], sets: list[str],
                      preset: str | None = None) -> Config:
     """Preset, then config file, then flags, then ``--set``; ``--algo`` (or the file's variant, else mope) sets the
@@ -257,6 +275,7 @@ def act(
 ) -> None:
     """Play one greedy episode under a preference and print its return vector (optionally record a GIF)."""
     quiet_media()
+    _check_pref_of_run(checkpoint, pref)
     from mope.evaluation.video import record_video
     from mope.experiments.runs import load_agent, play
     from mope.preferences import validate_preference

@@ -275,18 +275,20 @@ def act(
 ) -> None:
     """Play one greedy episode under a preference and print its return vector (optionally record a GIF)."""
     quiet_media()
-    _check_pref_of_run(checkpoint, pref)
-    from mope.evaluation.video import record_video
-    from mope.experiments.runs import load_agent, play
-    from mope.preferences import validate_preference
+    from mope.evaluation.video import check_video_path, record_video
 
+    _check_pref_of_run(checkpoint, pref)  # bad input is refused before torch is imported
     if video is not None:
-        agent = load_agent(checkpoint, device)
-        w = validate_preference(pref, agent.m)
-        rec = record_video(agent, agent.config.env_id, w, video, seed=seed, max_steps=agent.config.max_episode_steps)
+        check_video_path(video)
+    from mope.experiments.runs import load_agent, play
+
+    agent = load_agent(checkpoint, device)
+    sols = play(agent, pref, seed=seed)
+    if video is not None:
+        rec = record_video(agent, agent.config.env_id, sols.prefs[0], video, seed=seed,
+                           max_steps=agent.config.max_episode_steps)
         outcome = f", outcome: {rec['outcome']}" if rec.get("outcome") else ""
         typer.echo(f"video: {rec['path']} ({rec['frames']} frames{outcome})")
-    sols = play(checkpoint, pref, device, seed)
     fmt = ", ".join
     typer.echo(f"preference: [{fmt(f'{x:.4g}' for x in sols.prefs[0])}]")
     typer.echo(f"return: [{fmt(f'{x:.4g}' for x in sols.returns[0])}]")

@@ -63,10 +63,7 @@ def record_video(policy: Any, env_id: str, pref: Any, path: str | Path, seed: in
 
     from mope.preferences import validate_preference
 
-    out = Path(path)
-    if out.suffix.lower() != ".gif":
-        raise VideoError(f"video path '{out}' must end in .gif")
-    _check_writable(out)
+    out = check_video_path(path)
     quiet_media()
     env = _rendering_env(env_id, env_kwargs)
     m = int(env.unwrapped.reward_space.shape[0])
@@ -102,6 +99,15 @@ def quiet_media() -> None:
     for key, value in (("SDL_AUDIODRIVER", "dummy"), ("SDL_VIDEODRIVER", "dummy"),
                        ("PYGAME_HIDE_SUPPORT_PROMPT", "1"), ("AUDIODEV", "null")):
         os.environ.setdefault(key, value)
+
+
+def check_video_path(path: str | Path) -> Path:
+    """The video's path, refused (:class:`VideoError`) unless it ends in ``.gif`` and can be written."""
+    out = Path(path)
+    if out.suffix.lower() != ".gif":
+        raise VideoError(f"video path '{out}' must end in .gif")
+    _check_writable(out)
+    return out
 
 
 def _check_writable(out: Path) -> None:

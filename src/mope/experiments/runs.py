@@ -748,8 +748,9 @@ def check_output_file(path: str | Path, flag: str = "--out") -> Path:
     return p
 
 
-def play(path: str | Path, pref: Any, device: str | None = None, seed: int = 0) -> Solutions:
-    """Play one greedy episode of a checkpoint under ``pref`` from reset seed ``seed``; one-row :class:`Solutions`."""
-    agent = load_agent(path, device)
+def play(path: str | Path | MoPE, pref: Any, device: str | None = None, seed: int = 0) -> Solutions:
+    """Play one greedy episode of a checkpoint (or a loaded agent) under ``pref`` from reset seed ``seed``; one-row
+    :class:`Solutions`."""
+    agent = path if isinstance(path, MoPE) else load_agent(path, device)
     w = validate_preference(pref, agent.m)
     return solutions(agent, agent.env, w[None], agent.config.gamma, agent.config.max_episode_steps, seed=seed)

@@ -327,6 +327,7 @@ def test_benchmark_quick_runs_and_keeps_finished_runs(tmp_path: Path) -> None:
              "--no-progress")
     res = cli(*quick, timeout=1500)
     assert res.returncode == 0, res.stderr
+    assert "benchmark: 4 runs into" in res.stderr and "mope; seed 0" in res.stderr  # the plan, before training
     text = (out / "benchmark.md").read_text()
     for env_id in ("deep-sea-treasure-v0", "resource-gathering-v0", "minecart-deterministic-v0", "four-room-v0"):
         assert f"## {env_id}" in text and (out / f"{env_id}.png").is_file()
@@ -337,6 +338,17 @@ def test_benchmark_quick_runs_and_keeps_finished_runs(tmp_path: Path) -> None:
     stamp = (out / "deep-sea-treasure-v0-mope-s0" / "summary.json").stat().st_mtime
     again = cli(*quick)  # a re-run keeps the finished runs
     assert again.returncode == 0 and (out / "deep-sea-treasure-v0-mope-s0" / "summary.json").stat().st_mtime == stamp
+
+
+def test_the_benchmark_plan_names_the_seeds_it_trains() -> None:
+    """``--seeds 4`` trains seeds 0-3 (a count), ``--seeds 4-4`` seed 4: the line printed before training says which."""
+    from mope.experiments.sweep import seed_list
+    from mope.paper.benchmark import plan_line
+
+    assert plan_line(["four-room-v0"], ["eql"], seed_list("4"), Path("b")).endswith("eql; seeds 0-3")
+    line = plan_line(["four-room-v0", "minecart-deterministic-v0"], ["eql", "mope"], seed_list("4-4"), Path("b"))
+    assert line.startswith("benchmark: 4 runs into b") and line.endswith("eql, mope; seed 4")
+    assert plan_line(["four-room-v0"], ["eql"], seed_list("0,5,7"), Path("b")).endswith("seeds 0, 5, 7")
 
 
 def _fake_bench_run(out: Path, env_id: str, method: str, seed: int, steps: int, cr: float) -> None:

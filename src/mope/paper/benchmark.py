@@ -36,6 +36,7 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -164,6 +165,16 @@ def check_choices(envs: list[str], methods: list[str], seeds: int | str | Sequen
 
         require_morl_baselines()
     return seed_values
+
+
+def plan_line(envs: list[str], methods: list[str], seeds: Sequence[int], out: Path) -> str:
+    """What a benchmark call is about to run, printed before it starts: ``--seeds 4`` means seeds 0-3, not seed 4."""
+    ordered = sorted(seeds)
+    contiguous = len(ordered) > 2 and ordered == list(range(ordered[0], ordered[-1] + 1))
+    seed_text = f"{ordered[0]}-{ordered[-1]}" if contiguous else ", ".join(map(str, ordered))
+    n = len(envs) * len(methods) * len(seeds)
+    return (f"benchmark: {n} run{'s' * (n != 1)} into {out} (finished ones are kept): {', '.join(envs)}; "
+            f"{', '.join(methods)}; seed{'s' * (len(ordered) != 1)} {seed_text}")
 
 
 def benchmark_jobs(envs: list[str], methods: list[str], seeds: Sequence[int], quick: bool, steps: int | None
@@ -556,6 +567,7 @@ def run_benchmark(out: str | Path, envs: list[str] | None = None, methods: list[
     with contextlib.nullcontext() if report_only else FolderLock(out, what="benchmark folder"):
         t0 = time.perf_counter()
         if jobs:
+            print(plan_line(envs, list(methods), seeds, out), file=sys.stderr, flush=True)
             out.mkdir(parents=True, exist_ok=True)
             if not (out / ".gitignore").exists():
                 (out / ".gitignore").write_text(GITIGNORE)

@@ -152,7 +152,9 @@ def test_overrides_pin_grid_axes_and_seeds() -> None:
 @pytest.mark.slow
 def test_local_and_ray_backends_agree(local_sweep: Path, tmp_path: Path) -> None:
     ray = pytest.importorskip("ray")
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    # one Ray worker: beside the suite's other pytest worker, two Ray workers starved (262 s in a .ci/run beside one
+    # training, where this test alone takes 37 s); with one, 19 s against 31 s beside a busy core
+    ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False)
     try:
         results = run_sweep(parse_spec(SPEC), tmp_path, backend="ray", progress=False)
     finally:

@@ -170,10 +170,12 @@ def _check_pref_of_run(path: Path, pref: str) -> None:
     try:
         cfg = Config.load(path / "config.json")
         env = make_env(cfg.env_id)
-        m = check_env_fits(env, cfg.env_id).n_objectives
-        env.close()
-    except MopeError:
-        return  # a broken folder is named by the loader, as before
+        try:
+            m = check_env_fits(env, cfg.env_id).n_objectives
+        finally:
+            env.close()
+    except Exception:  # noqa: BLE001 - only an early check: whatever is wrong with the folder, the loader names it
+        return
     validate_preference(pref, m)
 
 

@@ -148,13 +148,14 @@ def _int_list(flag: str, text: str) -> list[int]:
         raise ConfigError(f"{flag} '{text}' is not a comma-separated list of integers") from None
 
 
-def _check_env(env_id: str) -> None:
-    """Refuse an unknown environment, or one whose spaces EQL/MoPE cannot learn, before torch is imported."""
+def _check_env(env_id: str) -> Any:
+    """Refuse an unknown environment, or one whose spaces EQL/MoPE cannot learn, before torch is imported; returns
+    its :class:`mope.envs.EnvSpec`."""
     from mope.envs import check_env_fits, make_env
 
     env = make_env(env_id)
     try:
-        check_env_fits(env, env_id)
+        return check_env_fits(env, env_id)
     finally:
         env.close()
 
@@ -164,16 +165,10 @@ def _check_pref_of_run(path: Path, pref: str) -> None:
     of the folder's config.json. A checkpoint file is checked once it is loaded (the only place its env is named)."""
     if not (path.is_dir() and (path / "config.json").is_file()):
         return
-    from mope.envs import check_env_fits, make_env
     from mope.preferences import validate_preference
 
     try:
-        cfg = Config.load(path / "config.json")
-        env = make_env(cfg.env_id)
-        try:
-            m = check_env_fits(env, cfg.env_id).n_objectives
-        finally:
-            env.close()
+        m = _check_env(Config.load(path / "config.json").env_id).n_objectives
     except Exception:  # noqa: BLE001 - only an early check: whatever is wrong with the folder, the loader names it
         return
     validate_preference(pref, m)

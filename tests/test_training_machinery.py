@@ -419,6 +419,25 @@ def test_benchmark_report_covers_every_committed_piece(tmp_path: Path) -> None:
     assert "*/*" in GITIGNORE and "!*/metrics.csv" in GITIGNORE
 
 
+def test_readme_table_marks_a_cr_the_runs_did_not_record() -> None:
+    """Runs that predate an environment's exact front have no CR: the cell says so with a footnote, not a bare n/a."""
+    from mope.paper.benchmark import readme_table
+
+    def stats(n: int, mean: float = 1.0) -> dict[str, float]:
+        return {"n": n, "mean": mean, "ci_low": mean, "ci_high": mean}
+
+    def method(cr_n: int) -> dict[str, object]:
+        return {"seeds": 2, "reached": 0, "stats": {"cr": stats(cr_n, 0.0), "eum": stats(2), "eum_last": stats(2),
+                                                       "eum_gap": stats(2), "hv": stats(2)}}
+
+    meta = {"known_front": True, "optimal_eum": 3.0, "stochastic": False, "steps": 1000}
+    table = readme_table({"four-room-v0": {"_meta": meta, "mope": method(0), "eql": method(2)}})
+    rows = {r.split("|")[3].strip(): r.split("|")[5].strip() for r in table.splitlines()[2:] if r.startswith("|")}
+    assert rows == {"mope": "n/a *", "eql": "0.000 [0.000, 0.000]"}
+    assert "\\* These runs ran before mope knew" in table
+    assert "These runs ran" not in readme_table({"four-room-v0": {"_meta": meta, "eql": method(2)}})
+
+
 def test_readme_benchmark_table_is_the_committed_results() -> None:
     """The README's benchmark table is the one ``mope benchmark`` generates from docs/results/benchmark."""
     from mope.paper.benchmark import README_MARKERS, readme_table
@@ -430,7 +449,8 @@ def test_readme_benchmark_table_is_the_committed_results() -> None:
     block = readme[start + len(README_MARKERS[0]):end].strip("\n") + "\n"
     assert block == readme_table(summary)
     assert block == (root / "docs/results/benchmark/readme_table.md").read_text()
-    methods = {row.split("|")[3].strip() for row in block.splitlines()[2:]}  # today's, the two before, the peer
+    rows = [row for row in block.splitlines()[2:] if row.startswith("|")]
+    methods = {row.split("|")[3].strip() for row in rows}  # today's, the two before, the peer
     assert {"mope", "envelope"} <= methods <= {"mope", "eql", "mope-lb-w1", "mope-lb-abs", "eql-lb-abs", "envelope"}
     assert "| mope-const |" in (root / "docs/results/benchmark/benchmark.md").read_text()  # the others: there
 

@@ -395,7 +395,7 @@ def readme_table(summary: dict[str, dict[str, dict[str, Any]]]) -> str:
     seeds)."""
     from mope.experiments.plots import markdown_table
 
-    rows = []
+    rows, unrecorded = [], False
     for env_id, by_method in summary.items():
         known = by_method["_meta"]["known_front"]
         optimum = math.isfinite(by_method["_meta"].get("optimal_eum", math.nan))
@@ -403,15 +403,22 @@ def readme_table(summary: dict[str, dict[str, dict[str, Any]]]) -> str:
         steps = by_method["_meta"]["steps"]
         for k, method in enumerate(m for m in README_METHODS if m in by_method):
             st = by_method[method]["stats"]
+            cr = _cell(st["cr"], ".3f") if known and single else "-"
+            if cr == "n/a":
+                cr, unrecorded = "n/a *", True
             rows.append([env_id if k == 0 else "", f"{steps:,}" if k == 0 else "", method,
-                         str(by_method[method]["seeds"]), _cell(st["cr"], ".3f") if known and single else "-",
+                         str(by_method[method]["seeds"]), cr,
                          _cell(st["eum"], ".3f"), _cell(st["eum_last"], ".3f") if "eum_last" in st else "n/a",
                          _cell(st["eum_gap"], ".3f") if known or optimum else "-",
                          _cell(st["hv"], ".1f") if single else "-",
                          f"{by_method[method]['reached']}/{by_method[method]['seeds']}"])
-    return markdown_table(["environment", "steps", "method", "seeds", "CR", "EUM",
+    table = markdown_table(["environment", "steps", "method", "seeds", "CR", "EUM",
                            f"EUM, mean of the last {LAST_EVALS} evaluations", "EUM gap to optimum", "HV",
-                           "seeds that reached 95 % of the optimal EUM"], rows) + "\n"
+                           "seeds that reached 95 % of the optimal EUM"], rows)
+    if unrecorded:
+        table += ("\n\n\\* These runs ran before mope knew the environment's exact front, and their compact files keep "
+                  "no solutions, so their CR cannot be computed now; the EUM gap is of the exact optimum.")
+    return table + "\n"
 
 
 def _target_note(meta: dict[str, Any]) -> list[str]:

@@ -7,32 +7,21 @@ usage: python scripts/demos_lb_weight.py STEPS SEEDS   (e.g. 3000 0,1,2,3,4,5); 
 
 import json
 import sys
-import tempfile
-import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from test_learning_from_demonstrations import treasure_demonstrations  # noqa: E402
-
-from mope import MoPE  # noqa: E402
-from mope.agent.demonstrations import save_demonstrations  # noqa: E402
-from mope.envs import make_env  # noqa: E402
-from mope.evaluation.evaluator import Evaluator  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from demos_test_probe import demonstrations_and_evaluator, train_arm  # noqa: E402
 
 
 def main(steps: int, seeds: list[int]) -> None:
-    path = save_demonstrations(Path(tempfile.mkdtemp()) / "treasures.npz", treasure_demonstrations())
-    ev = Evaluator.from_config(make_env("deep-sea-treasure-v0"), MoPE("deep-sea-treasure-v0").config)
+    path, ev = demonstrations_and_evaluator()
     arms = {"plain": {"demos": ""}, "demo1": {"demos": str(path)},
             "demo4": {"demos": str(path), "demo_loss_weight": 4.0}}
     for seed in seeds:
         row: dict = {"seed": seed}
         for name, kw in arms.items():
-            t = time.time()
-            agent = MoPE("deep-sea-treasure-v0", seed=seed, **kw)
-            agent.train(steps)
-            r = ev.evaluate(agent)[0]
-            row[name] = (round(r["optimal_share"], 3), round(r["cr"], 3), round(time.time() - t))
+            share, cr, secs = train_arm(ev, seed, steps, **kw)
+            row[name] = (round(share, 3), round(cr, 3), round(secs))
         print(json.dumps(row), flush=True)
 
 

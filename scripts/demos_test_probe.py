@@ -25,19 +25,29 @@ from mope.envs import make_env  # noqa: E402
 from mope.evaluation.evaluator import Evaluator  # noqa: E402
 
 
+def demonstrations_and_evaluator() -> tuple[Path, Evaluator]:
+    """The learning test's demonstrations (saved to a temporary file) and a Deep-Sea-Treasure evaluator."""
+    path = save_demonstrations(Path(tempfile.mkdtemp()) / "treasures.npz", treasure_demonstrations())
+    return path, Evaluator.from_config(make_env("deep-sea-treasure-v0"), MoPE("deep-sea-treasure-v0").config)
+
+
+def train_arm(ev: Evaluator, seed: int, steps: int, **settings: object) -> tuple[float, float, float]:
+    """Train one arm for ``steps`` and return its (optimal share, CR, seconds)."""
+    t = time.time()
+    agent = MoPE("deep-sea-treasure-v0", seed=seed, **settings)
+    agent.train(steps)
+    r = ev.evaluate(agent)[0]
+    return r["optimal_share"], r["cr"], time.time() - t
+
+
 def main(steps: int, seeds: list[int], settings: dict, demo_settings: dict) -> None:
     torch.set_num_threads(1)
-    path = save_demonstrations(Path(tempfile.mkdtemp()) / "treasures.npz", treasure_demonstrations())
-    ev = Evaluator.from_config(make_env("deep-sea-treasure-v0"), MoPE("deep-sea-treasure-v0").config)
+    path, ev = demonstrations_and_evaluator()
     for seed in seeds:
         for demos in (str(path), ""):
-            t = time.time()
-            agent = MoPE("deep-sea-treasure-v0", seed=seed, demos=demos, lb_weight=1.0, **settings,
-                         **(demo_settings if demos else {}))
-            agent.train(steps)
-            r = ev.evaluate(agent)[0]
-            print(seed, "demos" if demos else "none ", f"share {r['optimal_share']:.3f} cr {r['cr']:.3f}  "
-                  f"{time.time() - t:.0f}s", flush=True)
+            share, cr, secs = train_arm(ev, seed, steps, demos=demos, lb_weight=1.0, **settings,
+                                        **(demo_settings if demos else {}))
+            print(seed, "demos" if demos else "none ", f"share {share:.3f} cr {cr:.3f}  {secs:.0f}s", flush=True)
 
 
 if __name__ == "__main__":

@@ -14,12 +14,11 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import statistics
-import time
 from pathlib import Path
 
 import mo_gymnasium as mo_gym
 import numpy as np
+from bench_speed import median_seconds  # noqa: E402  (benchmarks/ is the script's folder)
 
 import mope
 import mope.envs.confrontation as conf
@@ -41,15 +40,6 @@ class _NoBatch:
         return getattr(self.env, name)
 
 
-def timed(fn: object, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
-
-
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--prefs", type=int, default=100)
@@ -69,12 +59,17 @@ def main() -> None:
 
     rows = []
     n = len(seeds)
+
+    def batched_env() -> object:
+        return mo_gym.make(conf.DISCRETE_ID).unwrapped
+
+    def single_env() -> object:
+        return _NoBatch(mo_gym.make(conf.DISCRETE_ID).unwrapped)
+
     for label, pol in (("untrained MoPE agent", policy), ("coasting red (long games)", coast)):
-        batched = timed(lambda pol=pol: play_episodes(pol, lambda: mo_gym.make(conf.DISCRETE_ID).unwrapped, n, seeds,
-                                                      150), a.repeats)
-        single = timed(lambda pol=pol: play_episodes(pol, lambda: _NoBatch(mo_gym.make(conf.DISCRETE_ID).unwrapped),
-                                                     n, seeds, 150), 1)
-        eps = play_episodes(pol, lambda: mo_gym.make(conf.DISCRETE_ID).unwrapped, n, seeds, 150)
+        batched = median_seconds(lambda pol=pol: play_episodes(pol, batched_env, n, seeds, 150), a.repeats)
+        single = median_seconds(lambda pol=pol: play_episodes(pol, single_env, n, seeds, 150), 1)
+        eps = play_episodes(pol, batched_env, n, seeds, 150)
         rows.append(f"| {label} | {a.prefs} x {a.episodes} | {np.mean(eps.lengths):.0f} | {batched:.2f} | "
                     f"{single:.2f} | {single / batched:.0f}x |")
     text = "\n".join([

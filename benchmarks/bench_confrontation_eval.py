@@ -1,12 +1,13 @@
 """Time one evaluation on the Robot Confrontation Game: 100 preferences x 5 episodes, batched game vs one Python
 environment per episode (issue 14's target: <= 5 s).
 
-    .venv/bin/python benchmarks/bench_confrontation_eval.py [--prefs 100] [--episodes 5] [--repeats 3]
+    .venv/bin/python benchmarks/bench_confrontation_eval.py [--prefs 100] [--episodes 5] [--repeats 3] [--out FILE]
 
 The agent is an untrained MoPE agent of ``mope/RobotConfrontationDiscrete-v0`` (the cost of an evaluation does not
 depend on what the weights are, only on how long the games last: an untrained red loses or leaves the arena in
-most games, a trained one plays longer, so the time-limit-only case is measured too). Writes
-``benchmarks/results/confrontation-eval.md``.
+most games, a trained one plays longer, so the time-limit-only case is measured too). Prints the table; with
+``--out benchmarks/results/confrontation-eval.md`` it also writes the committed one (a quick run with other settings
+no longer overwrites it).
 """
 
 from __future__ import annotations
@@ -45,7 +46,8 @@ def main() -> None:
     p.add_argument("--prefs", type=int, default=100)
     p.add_argument("--episodes", type=int, default=5)
     p.add_argument("--repeats", type=int, default=3)
-    p.add_argument("--out", type=Path, default=Path("benchmarks/results/confrontation-eval.md"))
+    p.add_argument("--out", type=Path, default=None,
+                   help="also write the table here (the committed one: benchmarks/results/confrontation-eval.md)")
     a = p.parse_args()
     agent = mope.MoPE(conf.DISCRETE_ID, seed=0)
     w = np.repeat(equally_spaced(2, a.prefs), a.episodes, axis=0)
@@ -79,10 +81,11 @@ def main() -> None:
         "| policy | prefs x episodes | mean length | batched game, s | one env per episode, s | speed-up |",
         "|---|---|---:|---:|---:|---:|", *rows, "",
         f"Command: `python benchmarks/bench_confrontation_eval.py --prefs {a.prefs} --episodes {a.episodes} "
-        f"--repeats {a.repeats}`"])
+        f"--repeats {a.repeats}" + (f" --out {a.out}`" if a.out else "`")])
     print(text)
-    a.out.parent.mkdir(parents=True, exist_ok=True)
-    a.out.write_text(text + "\n")
+    if a.out:
+        a.out.parent.mkdir(parents=True, exist_ok=True)
+        a.out.write_text(text + "\n")
 
 
 if __name__ == "__main__":

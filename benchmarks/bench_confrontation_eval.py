@@ -19,7 +19,7 @@ from pathlib import Path
 
 import mo_gymnasium as mo_gym
 import numpy as np
-from bench_speed import median_seconds  # noqa: E402  (benchmarks/ is the script's folder)
+from bench_speed import median_seconds  # benchmarks/, the script's own folder
 
 import mope
 import mope.envs.confrontation as conf

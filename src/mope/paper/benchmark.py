@@ -403,9 +403,9 @@ def readme_table(summary: dict[str, dict[str, dict[str, Any]]]) -> str:
         steps = by_method["_meta"]["steps"]
         for k, method in enumerate(m for m in README_METHODS if m in by_method):
             st = by_method[method]["stats"]
-            cr = _cell(st["cr"], ".3f") if known and single else "-"
-            if cr == "n/a":
-                cr, unrecorded = "n/a *", True
+            missing_cr = known and single and not st["cr"]["n"]  # the runs predate the front: no CR recorded
+            unrecorded |= missing_cr
+            cr = "n/a *" if missing_cr else _cell(st["cr"], ".3f") if known and single else "-"
             rows.append([env_id if k == 0 else "", f"{steps:,}" if k == 0 else "", method,
                          str(by_method[method]["seeds"]), cr,
                          _cell(st["eum"], ".3f"), _cell(st["eum_last"], ".3f") if "eum_last" in st else "n/a",
